@@ -1,0 +1,38 @@
+# maptidal: the two commands a new user needs are `make run` and `make test`.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.setup-stamp
+RUN_DIR ?= runs/default
+
+# Headless rendering through EGL works on CPU-only machines (Mesa) and on NVIDIA GPUs.
+export MUJOCO_GL ?= egl
+export PYOPENGL_PLATFORM ?= egl
+
+.PHONY: setup run test bench lint clean
+
+setup: $(STAMP)
+
+# Idempotent: reinstalls only when the pins or the package metadata change.
+$(STAMP): pyproject.toml requirements.lock
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -r requirements.lock
+	$(BIN)/python -m pip install -q --no-deps -e .
+	touch $(STAMP)
+
+run: setup
+	$(BIN)/maptidal demo --out $(RUN_DIR)
+
+test: setup
+	$(BIN)/python -m pytest -q
+
+bench: setup
+	$(BIN)/python tests/bench/bench_discovery.py
+
+lint: setup
+	$(BIN)/ruff check maptidal envs controllers tests
+	$(BIN)/ruff format --check maptidal envs controllers tests
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache .hypothesis .ruff_cache *.egg-info

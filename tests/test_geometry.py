@@ -1,0 +1,102 @@
+"""Frustum and neighbour-grid geometry against independent references."""
+
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+from maptidal.geometry import (
+    CameraModel,
+    SpatialGrid,
+    camera_axes,
+    count_in_frustums,
+    frustum_bounding_spheres,
+    frustum_corners,
+    in_frustum,
+)
+
+
+def _unit(v):
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+@pytest.mark.parametrize("direction", [[1, 0, 0], [0.3, -0.8, 0.2], [0, 0, -1], [0.05, 0.02, 0.998]])
+def test_frustum_agrees_with_delaunay_pyramid(direction):
+    rng = np.random.default_rng(7)
+    camera = CameraModel(72.0, 57.0, 2.0)
+    viewpoint = np.concatenate([[0.4, -0.2, 1.0], _unit(direction)])
+    points = viewpoint[:3] + rng.uniform(-2.5, 2.5, (20000, 3))
+    expected = Delaunay(frustum_corners(viewpoint, camera)).find_simplex(points) >= 0
+    got = in_frustum(viewpoint, points, camera)
+    assert expected.sum() > 200  # the sample really probes the pyramid
+    np.testing.assert_array_equal(got, expected)
+
+
+def test_camera_axes_have_zero_roll_and_are_orthonormal():
+    directions = _unit(np.random.default_rng(1).normal(size=(500, 3)))
+    right, up = camera_axes(directions)
+    for a, b in ((right, up), (right, directions), (up, directions)):
+        np.testing.assert_allclose(np.sum(a * b, axis=1), 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(right, axis=1), 1.0)
+    level = np.abs(directions[:, 2]) <= 0.99
+    np.testing.assert_allclose(right[level, 2], 0.0, atol=1e-12)  # image x-axis horizontal
+    assert np.all(up[level, 2] >= 0.0)  # and the image is upright
+    vertical = ~level
+    if vertical.any():
+        np.testing.assert_allclose(right[vertical, 0], 0.0, atol=1e-12)
+
+
+def test_footprint_on_a_facing_wall_matches_the_field_of_view():
+    camera = CameraModel(72.0, 57.0, 2.0)
+    width, height = camera.footprint(1.0)
+    assert width == pytest.approx(2 * np.tan(np.radians(36)))
+    viewpoint = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+    inside = [[1.0, 0.99 * width / 2, 0.0], [1.0, 0.0, -0.99 * height / 2]]
+    outside = [
+        [1.0, 1.01 * width / 2, 0.0],
+        [1.0, 0.0, 1.01 * height / 2],
+        [2.01, 0, 0],
+        [-0.1, 0, 0],
+    ]
+    assert in_frustum(viewpoint, inside, camera).all()
+    assert not in_frustum(viewpoint, outside, camera).any()
+
+
+def test_count_in_frustums_equals_brute_force():
+    rng = np.random.default_rng(3)
+    camera = CameraModel(60.0, 45.0, 1.5)
+    points = rng.uniform(-3, 3, (4000, 3))
+    viewpoints = np.hstack([rng.uniform(-3, 3, (300, 3)), _unit(rng.normal(size=(300, 3)))])
+    expected = [np.count_nonzero(in_frustum(v, points, camera)) for v in viewpoints]
+    np.testing.assert_array_equal(count_in_frustums(viewpoints, points, camera), expected)
+    # Tiny batches exercise the chunking.
+    np.testing.assert_array_equal(count_in_frustums(viewpoints, points, camera, max_pairs=10), expected)
+
+
+def test_bounding_spheres_contain_their_frustums():
+    camera = CameraModel(72.0, 57.0, 2.0)
+    viewpoints = np.hstack([np.zeros((50, 3)), _unit(np.random.default_rng(4).normal(size=(50, 3)))])
+    centres, radius = frustum_bounding_spheres(viewpoints, camera)
+    for viewpoint, centre in zip(viewpoints, centres, strict=True):
+        corners = frustum_corners(viewpoint, camera)
+        assert np.all(np.linalg.norm(corners - centre, axis=1) <= radius * (1 + 1e-12))
+    assert radius < camera.range_m * np.sqrt(1 + camera.tan_half_h**2 + camera.tan_half_v**2)
+
+
+@pytest.mark.parametrize("offset", [0.0, 50.0])
+def test_spatial_grid_returns_each_neighbour_once(offset):
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-2, 2, (3000, 3))
+    grid = SpatialGrid(points, 0.7)
+    for query in rng.uniform(-3, 3, (40, 3)) + offset * np.array([1, 0, 0]):
+        indices, columns = grid.near(query)
+        assert len(np.unique(indices)) == len(indices)
+        np.testing.assert_array_equal(columns.T, points[indices])
+        within = np.flatnonzero(np.linalg.norm(points - query, axis=1) <= 0.7)
+        assert set(within) <= set(indices.tolist())
+
+
+def test_camera_rejects_bad_values():
+    for bad in ({"hfov_deg": 0}, {"vfov_deg": 180}, {"range_m": -1}, {"range_m": float("nan")}):
+        with pytest.raises(ValueError):
+            CameraModel(**bad)
