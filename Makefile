@@ -22,13 +22,14 @@ $(STAMP): pyproject.toml requirements.lock
 	touch $(STAMP)
 
 run: setup
-	$(BIN)/maptidal demo --out $(RUN_DIR)
+	$(BIN)/maptidal compare --out $(RUN_DIR)
 
 test: setup
 	$(BIN)/python -m pytest -q
 
 bench: setup
 	$(BIN)/python tests/bench/bench_discovery.py
+	$(BIN)/python tests/bench/bench_coverage.py
 
 lint: setup
 	$(BIN)/ruff check maptidal envs controllers tests

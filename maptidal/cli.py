@@ -2,7 +2,10 @@
 
 Subcommands:
   discover  Map-TIDAL task discovery on one mesh (PLY, OBJ or STL)
-  demo      discovery over a pass of synthetic keyframes; what `make run` runs
+  coverage  views per voxel of a task list on the tank model (paper Sec. IV.B-D)
+  compare   Map-TIDAL against Voronoi and boustrophedon; what `make run` runs
+  sweep     Map-TIDAL over a grid of t, r_ex, theta_ex (the layout of Table I)
+  demo      discovery over a pass of synthetic keyframes along one wall
 
 Every subcommand has ``--help``. Bad input ends with a one-line error and exit
 status 2; nothing half-written is left behind.
@@ -17,6 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams
+from maptidal.tank import TankConfigError
 
 EXIT_BAD_INPUT = 2
 
@@ -135,6 +139,118 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_coverage_args(parser: argparse.ArgumentParser) -> None:
+    from maptidal.coverage import CoverageParams
+
+    defaults = CoverageParams()
+    group = parser.add_argument_group("coverage model")
+    group.add_argument(
+        "--tank", metavar="CONFIG", help="tank config TOML (default assets/osb_tank/tank.toml)"
+    )
+    group.add_argument(
+        "--voxel",
+        type=float,
+        default=defaults.voxel_m,
+        metavar="M",
+        help="voxel size (default %(default)s m)",
+    )
+    group.add_argument(
+        "--far",
+        type=float,
+        default=defaults.far_m,
+        metavar="M",
+        help="frustum far plane (default %(default)s m)",
+    )
+    group.add_argument(
+        "--occlusion",
+        action="store_true",
+        help="count a voxel only when the ray to it is unblocked (the paper does not)",
+    )
+
+
+def _coverage_params(args: argparse.Namespace, discovery: DiscoveryParams | None = None):
+    from maptidal.coverage import CoverageParams
+
+    camera = discovery or DiscoveryParams()
+    return CoverageParams(
+        voxel_m=args.voxel,
+        far_m=args.far,
+        hfov_deg=camera.hfov_deg,
+        vfov_deg=camera.vfov_deg,
+        occlusion=args.occlusion,
+    )
+
+
+def _cmd_coverage(args: argparse.Namespace) -> int:
+    from maptidal.coverage import CoverageModel
+    from maptidal.files import atomic_write_json, load_tasks
+    from maptidal.tank import TankModel, load_tank_config
+
+    tasks = load_tasks(args.tasks)
+    tank = TankModel(load_tank_config(args.tank))
+    model = CoverageModel.from_tank(tank, _coverage_params(args))
+    report, views = model.evaluate(tasks)
+    document = {"tank": tank.config.name, **report.to_dict()}
+    if args.plot_dir:
+        from maptidal.coverage_plots import plot_histograms, plot_voxel_views
+
+        out = Path(args.plot_dir)
+        plot_histograms(
+            {"tasks": report}, out / "histogram.png", title=f"{Path(args.tasks).name} on {tank.config.name}"
+        )
+        plot_voxel_views(model.voxels, views, tasks, out / "voxels.png", title=Path(args.tasks).name)
+        atomic_write_json(out / "coverage.json", document)
+    if args.json:
+        print(json.dumps(document))
+    else:
+        print(
+            f"{report.n_viewpoints} viewpoints, {report.n_voxels} voxels: "
+            f"{report.pct_uninspected:.2f}% uninspected, "
+            f"{report.mean_views:.2f} mean views, MAD {report.mad:.4f}"
+        )
+    return 0
+
+
+def _evaluation_config(args: argparse.Namespace):
+    from maptidal.evaluation import EvaluationConfig
+
+    discovery = _params_from(args)
+    return EvaluationConfig(
+        tank_path=args.tank,
+        seed=args.seed,
+        coverage=_coverage_params(args, discovery),
+        discovery=discovery,
+    )
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from maptidal.evaluation import comparison_table, run_compare
+
+    out = None if args.no_write else args.out
+    document = run_compare(out, _evaluation_config(args), plots=not args.no_plots, progress=not args.json)
+    if args.json:
+        print(json.dumps({"methods": document["methods"]}))
+    else:
+        print(comparison_table(document["methods"]))
+        ordering = ", ".join(f"{k}: {v}" for k, v in document["ordering_as_paper"].items())
+        print(f"paper's ordering holds: {ordering}")
+        if out:
+            print(f"report: {Path(out) / 'report.md'}")
+    return 0
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from maptidal.evaluation import parse_grid, run_sweep, sweep_markdown
+
+    grid = parse_grid(args.grid or [])
+    if args.jobs < 1:
+        raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
+    rows = run_sweep(args.out, grid, _evaluation_config(args), jobs=args.jobs, plots=not args.no_plots)
+    print(sweep_markdown(rows))
+    print(f"files: {Path(args.out) / 'sweep.csv'}, sweep.md, sweep.png")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``maptidal`` command and its subcommands."""
     parser = argparse.ArgumentParser(
@@ -163,6 +279,63 @@ def build_parser() -> argparse.ArgumentParser:
     discover.add_argument("--plot", metavar="PNG", help="draw the mesh, CIPs and tasks")
     discover.set_defaults(handler=_cmd_discover)
 
+    coverage = commands.add_parser(
+        "coverage",
+        help="views per voxel of a task list on the tank model",
+        description="Voxelise the tank's evaluated walls and count, per voxel, the viewpoints whose camera "
+        "frustum contains it (paper Sec. IV.B); report %% uninspected, mean views and MAD against the ideal "
+        "gamma distribution (alpha 4, beta 2/3).",
+    )
+    coverage.add_argument("tasks", metavar="TASKS.json", help="viewpoints ({'tasks': [...]})")
+    _add_coverage_args(coverage)
+    coverage.add_argument("--json", action="store_true", help="print the full report as JSON")
+    coverage.add_argument("--plot-dir", metavar="DIR", help="write histogram.png, voxels.png, coverage.json")
+    coverage.set_defaults(handler=_cmd_coverage)
+
+    compare = commands.add_parser(
+        "compare",
+        help="Map-TIDAL vs Voronoi vs boustrophedon on the tank (what `make run` runs)",
+        description="Run Map-TIDAL on synthetic exploration keyframes of the tank, and the Voronoi and "
+        "boustrophedon baselines, score all three on the same voxels, print the paper's comparison table "
+        "and write compare.json, tasks, plots and report.md.",
+    )
+    _add_coverage_args(compare)
+    compare.add_argument(
+        "--seed", type=int, default=0, help="seed of keyframes and Voronoi (default %(default)s)"
+    )
+    compare.add_argument("--json", action="store_true", help='print {"methods": {...}} as JSON')
+    compare.add_argument(
+        "--out", default="runs/compare", metavar="DIR", help="output folder (default %(default)s)"
+    )
+    compare.add_argument("--no-write", action="store_true", help="write no files, only print")
+    compare.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    _add_discovery_params(compare)
+    compare.set_defaults(handler=_cmd_compare)
+
+    sweep = commands.add_parser(
+        "sweep",
+        help="Map-TIDAL over a grid of t, r_ex and theta_ex (Table I)",
+        description="Evaluate Map-TIDAL's coverage for every combination of the grid, in parallel local "
+        "processes; writes sweep.csv, sweep.md (Table I's layout) and sweep.png (heatmaps).",
+    )
+    sweep.add_argument(
+        "--grid",
+        nargs="+",
+        metavar="NAME=V1,V2",
+        help="grid values; default t=0.70,0.75,0.80 r_ex=1.5,1.6,1.7,1.8 theta_ex=0.25,0.3",
+    )
+    sweep.add_argument(
+        "--out", default="runs/sweep", metavar="DIR", help="output folder (default %(default)s)"
+    )
+    sweep.add_argument(
+        "--jobs", type=int, default=1, metavar="N", help="local processes (default %(default)s)"
+    )
+    sweep.add_argument("--seed", type=int, default=0, help="seed of the keyframes (default %(default)s)")
+    sweep.add_argument("--no-plots", action="store_true", help="skip the heatmap PNG")
+    _add_coverage_args(sweep)
+    _add_discovery_params(sweep)
+    sweep.set_defaults(handler=_cmd_sweep)
+
     demo = commands.add_parser(
         "demo",
         help="discovery over a pass of synthetic keyframes (what `make run` runs)",
@@ -187,7 +360,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.handler(args)
-    except DiscoveryInputError as err:
+    except (DiscoveryInputError, TankConfigError, ValueError) as err:
         print(f"maptidal {args.command}: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
 

@@ -1,0 +1,450 @@
+"""The tank model: one config, one geometry, used by every part of maptidal.
+
+The config (TOML, default ``assets/osb_tank/tank.toml``) describes the inspected end
+of a long tank in top view: a flat end wall with an inset window, two angled walls
+and the first part of the long side walls, plus a ladder and fouling patches. From
+it this module builds
+
+- the *wall strip*: the evaluated walls unrolled into a 2D rectangle
+  ``s in [0, length] x z in [0, water_depth]`` with a map back onto the walls, used
+  by the baselines and to place fouling;
+- the *evaluated surface* as a trimesh mesh (walls and window recess; not the floor,
+  the water surface or the ladder, as in the paper's Section IV.B);
+- the *scene*: everything a camera can see (all walls, floor, ladder), for ray casts.
+
+Frame: origin on the floor at the centre of the end wall, x from the water into
+the end wall (the wall lies in ``x = 0``), y to the left when facing it, z up.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+DEFAULT_TANK_CONFIG = Path(__file__).resolve().parent.parent / "assets" / "osb_tank" / "tank.toml"
+
+
+class TankConfigError(ValueError):
+    """A tank config that cannot describe a tank: the message says which value and why."""
+
+
+@dataclass(frozen=True)
+class WindowConfig:
+    """Inset window in the end wall (m); ``width = 0`` means no window."""
+
+    width: float = 1.0
+    height: float = 0.6
+    recess: float = 0.1
+    centre_height: float = 1.0
+    centre_offset: float = 0.0
+
+
+@dataclass(frozen=True)
+class LadderConfig:
+    """Safety ladder standing off the end wall (m); ``rails = 0`` means no ladder."""
+
+    rails: int = 2
+    centre_offset: float = 0.75
+    rail_spacing: float = 0.4
+    rail_width: float = 0.04
+    rung_width: float = 0.025
+    rung_spacing: float = 0.3
+    standoff: float = 0.15
+    top: float = 2.3
+
+
+@dataclass(frozen=True)
+class FoulingPatch:
+    """A disc of fouling on the unrolled wall strip: centre (s, z) and radius, in m."""
+
+    s: float
+    z: float
+    radius: float
+
+
+@dataclass(frozen=True)
+class TankConfig:
+    """Dimensions of the inspected end of a tank; defaults are our OSB tank model."""
+
+    name: str = "osb_tank"
+    water_depth: float = 2.0
+    end_wall_width: float = 2.4
+    angled_length: float = 1.0
+    angled_angle_deg: float = 45.0
+    side_length: float = 6.0
+    side_evaluated_length: float = 0.5
+    window: WindowConfig = field(default_factory=WindowConfig)
+    ladder: LadderConfig = field(default_factory=LadderConfig)
+    fouling: tuple[FoulingPatch, ...] = ()
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+
+def _require(condition: bool, message: str) -> None:
+    if not condition:
+        raise TankConfigError(message)
+
+
+def _finite(name: str, value: float, minimum: float = 0.0, strict: bool = False) -> None:
+    ok = isinstance(value, int | float) and math.isfinite(value)
+    ok = ok and (value > minimum if strict else value >= minimum)
+    bound = ">" if strict else ">="
+    _require(ok, f"{name} must be a finite number {bound} {minimum}, got {value!r}")
+
+
+def _validate(config: TankConfig) -> None:
+    _finite("water_depth", config.water_depth, strict=True)
+    _finite("end_wall.width", config.end_wall_width, strict=True)
+    _finite("angled_walls.length", config.angled_length)
+    _finite("side_walls.length", config.side_length)
+    _finite("side_walls.evaluated_length", config.side_evaluated_length)
+    _require(
+        isinstance(config.angled_angle_deg, int | float) and 0.0 < config.angled_angle_deg <= 90.0,
+        f"angled_walls.angle_deg must be in (0, 90], got {config.angled_angle_deg!r}",
+    )
+    _require(
+        config.side_evaluated_length <= config.side_length,
+        f"side_walls.evaluated_length ({config.side_evaluated_length}) exceeds side_walls.length "
+        f"({config.side_length})",
+    )
+    window = config.window
+    for name in ("width", "height", "recess", "centre_height"):
+        _finite(f"window.{name}", getattr(window, name))
+    _finite("window.centre_offset", abs(window.centre_offset))
+    if window.width > 0.0:
+        _require(window.height > 0.0, "window.height must be > 0 when window.width > 0")
+        half_w, half_h = window.width / 2, window.height / 2
+        _require(
+            abs(window.centre_offset) + half_w < config.end_wall_width / 2,
+            f"the window ({window.width} m wide at offset {window.centre_offset}) does not fit in the "
+            f"{config.end_wall_width} m end wall",
+        )
+        _require(
+            half_h < window.centre_height < config.water_depth - half_h,
+            f"the window ({window.height} m tall centred {window.centre_height} m up) does not fit in "
+            f"the {config.water_depth} m wall height",
+        )
+    ladder = config.ladder
+    _require(isinstance(ladder.rails, int) and ladder.rails in (0, 2), "ladder.rails must be 0 or 2")
+    if ladder.rails:
+        for name in ("rail_spacing", "rail_width", "rung_width", "rung_spacing", "standoff", "top"):
+            _finite(f"ladder.{name}", getattr(ladder, name), strict=True)
+        _finite("ladder.centre_offset", abs(ladder.centre_offset))
+        half_span = ladder.rail_spacing / 2 + ladder.rail_width / 2
+        _require(
+            abs(ladder.centre_offset) + half_span <= config.end_wall_width / 2,
+            f"the ladder ({ladder.rail_spacing} m wide at offset {ladder.centre_offset}) does not fit on "
+            f"the {config.end_wall_width} m end wall",
+        )
+        _require(ladder.standoff > ladder.rail_width / 2, "ladder.standoff must exceed half the rail width")
+    for patch in config.fouling:
+        _finite("fouling.radius", patch.radius, strict=True)
+        _finite("fouling.z", patch.z)
+        _finite("fouling.s", patch.s)
+
+
+def _section(document: dict, key: str) -> dict:
+    value = document.get(key, {})
+    _require(isinstance(value, dict), f"[{key}] must be a table")
+    return value
+
+
+def _build(cls, table: dict, where: str, renames: dict[str, str] | None = None):
+    renames = renames or {}
+    known = {f for f in cls.__dataclass_fields__}
+    kwargs = {}
+    for key, value in table.items():
+        name = renames.get(key, key)
+        _require(name in known, f"unknown key {key!r} in [{where}]")
+        kwargs[name] = value
+    return cls(**kwargs)
+
+
+def tank_config_from_dict(document: dict) -> TankConfig:
+    """Build a validated :class:`TankConfig` from a parsed TOML document."""
+    _require(isinstance(document, dict), "a tank config must be a TOML table")
+    top_level = {
+        "name",
+        "water_depth",
+        "end_wall",
+        "angled_walls",
+        "side_walls",
+        "window",
+        "ladder",
+        "fouling",
+    }
+    for key in document:
+        _require(key in top_level, f"unknown key {key!r} in the tank config")
+    end_wall = _section(document, "end_wall")
+    angled = _section(document, "angled_walls")
+    side = _section(document, "side_walls")
+    for table, where, allowed in (
+        (end_wall, "end_wall", {"width"}),
+        (angled, "angled_walls", {"length", "angle_deg"}),
+        (side, "side_walls", {"length", "evaluated_length"}),
+    ):
+        for key in table:
+            _require(key in allowed, f"unknown key {key!r} in [{where}]")
+    fouling = document.get("fouling", [])
+    _require(isinstance(fouling, list), "[[fouling]] must be an array of tables")
+    defaults = TankConfig()
+    try:
+        return TankConfig(
+            name=str(document.get("name", defaults.name)),
+            water_depth=document.get("water_depth", defaults.water_depth),
+            end_wall_width=end_wall.get("width", defaults.end_wall_width),
+            angled_length=angled.get("length", defaults.angled_length),
+            angled_angle_deg=angled.get("angle_deg", defaults.angled_angle_deg),
+            side_length=side.get("length", defaults.side_length),
+            side_evaluated_length=side.get("evaluated_length", defaults.side_evaluated_length),
+            window=_build(WindowConfig, _section(document, "window"), "window"),
+            ladder=_build(LadderConfig, _section(document, "ladder"), "ladder"),
+            fouling=tuple(_build(FoulingPatch, patch, "fouling") for patch in fouling),
+        )
+    except TypeError as err:  # a missing required key, such as a fouling patch without radius
+        raise TankConfigError(f"bad tank config: {err}") from None
+
+
+def load_tank_config(path: str | Path | None = None) -> TankConfig:
+    """Read and validate a tank config (TOML); ``None`` loads the default OSB tank."""
+    path = Path(path) if path is not None else DEFAULT_TANK_CONFIG
+    if not path.is_file():
+        raise TankConfigError(f"tank config not found: {path}")
+    try:
+        document = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise TankConfigError(f"{path}: not valid TOML ({err})") from None
+    try:
+        return tank_config_from_dict(document)
+    except TankConfigError as err:
+        raise TankConfigError(f"{path}: {err}") from None
+
+
+@dataclass(frozen=True)
+class WallSegment:
+    """One flat wall of the evaluated strip, in top view: from ``start`` to ``end``."""
+
+    name: str
+    start: np.ndarray  # (2,) x, y
+    end: np.ndarray  # (2,)
+    s0: float  # strip coordinate of ``start``
+
+    @property
+    def length(self) -> float:
+        """Length of the wall (m)."""
+        return float(np.linalg.norm(self.end - self.start))
+
+    @property
+    def tangent(self) -> np.ndarray:
+        """Unit vector (3,) along the wall, in the direction of increasing s."""
+        d = (self.end - self.start) / self.length
+        return np.array([d[0], d[1], 0.0])
+
+    @property
+    def inward_normal(self) -> np.ndarray:
+        """Unit normal (3,) pointing from the wall into the water."""
+        t = self.tangent
+        return np.array([t[1], -t[0], 0.0])
+
+
+def _box_triangles(centre: np.ndarray, half: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """The 12 triangles (12, 3, 3) of a box with the given centre, half sizes and axes (rows)."""
+    box = trimesh.creation.box(extents=2.0 * half)
+    vertices = box.vertices @ axes + centre
+    return vertices[box.faces]
+
+
+class TankModel:
+    """Geometry derived from a :class:`TankConfig`: strip, surface mesh and scene."""
+
+    def __init__(self, config: TankConfig | None = None) -> None:
+        self.config = config or TankConfig()
+        self.segments = self._segments()
+        self.strip_length = sum(seg.length for seg in self.segments)
+        self.height = self.config.water_depth
+
+    # ----- top view ---------------------------------------------------------------
+    def _segments(self) -> list[WallSegment]:
+        c = self.config
+        half = c.end_wall_width / 2
+        angle = math.radians(c.angled_angle_deg)
+        ax, ay = c.angled_length * math.sin(angle), c.angled_length * math.cos(angle)
+        side_y = half + ay
+        points = [
+            ("side_left", (-ax - c.side_evaluated_length, side_y), (-ax, side_y)),
+            ("angled_left", (-ax, side_y), (0.0, half)),
+            ("end", (0.0, half), (0.0, -half)),
+            ("angled_right", (0.0, -half), (-ax, -side_y)),
+            ("side_right", (-ax, -side_y), (-ax - c.side_evaluated_length, -side_y)),
+        ]
+        segments, s = [], 0.0
+        for name, start, end in points:
+            start, end = np.array(start, float), np.array(end, float)
+            length = float(np.linalg.norm(end - start))
+            if length > 1e-9:
+                segments.append(WallSegment(name, start, end, s))
+                s += length
+        return segments
+
+    def segment(self, name: str) -> WallSegment:
+        """The wall segment called ``name`` (side_left, angled_left, end, ...)."""
+        for seg in self.segments:
+            if seg.name == name:
+                return seg
+        raise KeyError(name)
+
+    def corner_s(self) -> np.ndarray:
+        """Strip coordinates of the section corners, both ends included."""
+        return np.array([seg.s0 for seg in self.segments] + [self.strip_length])
+
+    def end_wall_s(self, offset: float) -> float:
+        """Strip coordinate of a point ``offset`` m along the end wall from its centre."""
+        end = self.segment("end")
+        return end.s0 + end.length / 2 + offset
+
+    def strip_to_world(self, s: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Map strip coordinates to wall points ``(N, 3)`` and inward normals ``(N, 3)``.
+
+        At a corner between two walls the normal is the bisector of theirs, so a
+        viewpoint placed there looks into the corner.
+        """
+        s = np.clip(np.atleast_1d(np.asarray(s, float)), 0.0, self.strip_length)
+        z = np.atleast_1d(np.asarray(z, float))
+        points = np.zeros((len(s), 3))
+        normals = np.zeros((len(s), 3))
+        starts = np.array([seg.s0 for seg in self.segments])
+        index = np.clip(np.searchsorted(starts, s, side="right") - 1, 0, len(self.segments) - 1)
+        for k, seg in enumerate(self.segments):
+            mask = index == k
+            local = (s[mask] - seg.s0)[:, None]
+            points[mask, :2] = seg.start + local * seg.tangent[:2]
+            normals[mask] = seg.inward_normal
+        points[:, 2] = z
+        for k in range(1, len(self.segments)):
+            corner = np.isclose(s, self.segments[k].s0, atol=1e-9)
+            bisector = self.segments[k - 1].inward_normal + self.segments[k].inward_normal
+            normals[corner] = bisector / np.linalg.norm(bisector)
+        return points, normals
+
+    # ----- surfaces -----------------------------------------------------------------
+    def _wall_quads(self, seg: WallSegment, z_top: float) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Quads (4 corners, wanted normal) covering one wall, with the window hole cut out."""
+        p0 = np.array([*seg.start, 0.0])
+        t, n = seg.tangent, seg.inward_normal
+        up = np.array([0.0, 0.0, 1.0])
+
+        def quad(u0: float, u1: float, z0: float, z1: float, depth: float = 0.0, normal=n):
+            base = p0 - depth * n
+            corners = [base + u * t + z * up for u, z in ((u0, z0), (u1, z0), (u1, z1), (u0, z1))]
+            return np.array(corners), normal
+
+        window = self.config.window
+        if seg.name != "end" or window.width <= 0.0:
+            return [quad(0.0, seg.length, 0.0, z_top)]
+        u_c = seg.length / 2 + window.centre_offset
+        u0, u1 = u_c - window.width / 2, u_c + window.width / 2
+        z0, z1 = window.centre_height - window.height / 2, window.centre_height + window.height / 2
+        quads = [
+            quad(0.0, u0, 0.0, z_top),
+            quad(u1, seg.length, 0.0, z_top),
+            quad(u0, u1, 0.0, z0),
+            quad(u0, u1, z1, z_top),
+            quad(u0, u1, z0, z1, depth=window.recess),  # the pane, at the back of the recess
+        ]
+        if window.recess > 0.0:
+            r = window.recess
+
+            def reveal(a: np.ndarray, b: np.ndarray, normal: np.ndarray):
+                # A side of the recess: from edge a-b on the wall plane back to the pane.
+                return np.array([a, b, b - r * n, a - r * n]), normal
+
+            corner = {
+                key: p0 + u * t + z * up
+                for key, (u, z) in {"bl": (u0, z0), "br": (u1, z0), "tr": (u1, z1), "tl": (u0, z1)}.items()
+            }
+            quads += [
+                reveal(corner["bl"], corner["br"], up),  # sill faces up
+                reveal(corner["tl"], corner["tr"], -up),  # head faces down
+                reveal(corner["bl"], corner["tl"], t),  # left jamb faces +t
+                reveal(corner["br"], corner["tr"], -t),  # right jamb faces -t
+            ]
+        return quads
+
+    @staticmethod
+    def _quads_to_mesh(quads: list[tuple[np.ndarray, np.ndarray]]) -> trimesh.Trimesh:
+        triangles = []
+        for corners, normal in quads:
+            for tri in (corners[[0, 1, 2]], corners[[0, 2, 3]]):
+                if np.dot(np.cross(tri[1] - tri[0], tri[2] - tri[0]), normal) < 0.0:
+                    tri = tri[[0, 2, 1]]
+                triangles.append(tri)
+        return trimesh.Trimesh(**trimesh.triangles.to_kwargs(np.array(triangles)))
+
+    def evaluated_surface(self) -> trimesh.Trimesh:
+        """The evaluated walls and window recess, normals towards the water (paper Sec. IV.B)."""
+        quads = []
+        for seg in self.segments:
+            quads += self._wall_quads(seg, self.height)
+        return self._quads_to_mesh(quads)
+
+    def ladder_boxes(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """The ladder as boxes ``(centre, half sizes, axes rows)``: rails, then rungs."""
+        ladder = self.config.ladder
+        if not ladder.rails or "end" not in {seg.name for seg in self.segments}:
+            return []
+        seg = self.segment("end")
+        t, n, up = seg.tangent, seg.inward_normal, np.array([0.0, 0.0, 1.0])
+        axes = np.array([t, n, up])
+        origin = (
+            np.array([*seg.start, 0.0]) + (seg.length / 2 + ladder.centre_offset) * t + ladder.standoff * n
+        )
+        boxes = []
+        for side in (-0.5, 0.5):
+            centre = origin + side * ladder.rail_spacing * t + ladder.top / 2 * up
+            boxes.append((centre, np.array([ladder.rail_width, ladder.rail_width, ladder.top]) / 2, axes))
+        rung_half = np.array([ladder.rail_spacing / 2, ladder.rung_width / 2, ladder.rung_width / 2])
+        z = ladder.rung_spacing
+        while z < ladder.top - ladder.rung_width:
+            boxes.append((origin + z * up, rung_half, axes))
+            z += ladder.rung_spacing
+        return boxes
+
+    def scene_triangles(self, include_floor: bool = True, include_ladder: bool = True) -> np.ndarray:
+        """Every surface a camera in the water can see, as triangles ``(T, 3, 3)``.
+
+        The whole side walls (not only their evaluated part), the floor under the
+        modelled end of the tank and the ladder; the water surface is left out.
+        """
+        c = self.config
+        quads = []
+        for seg in self.segments:
+            quads += self._wall_quads(seg, self.height)
+        far_x = min(float(seg.start[0]) for seg in self.segments) - (c.side_length - c.side_evaluated_length)
+        near_x = min(float(min(seg.start[0], seg.end[0])) for seg in self.segments)
+        side_y = max(abs(float(seg.start[1])) for seg in self.segments)
+        if c.side_length > c.side_evaluated_length:
+            for sign in (1.0, -1.0):
+                a = np.array([near_x, sign * side_y, 0.0])
+                b = np.array([far_x, sign * side_y, 0.0])
+                corners = np.array([a, b, b + [0, 0, self.height], a + [0, 0, self.height]])
+                quads.append((corners, np.array([0.0, -sign, 0.0])))
+        if include_floor:
+            corners = np.array(
+                [[far_x, -side_y, 0.0], [0.0, -side_y, 0.0], [0.0, side_y, 0.0], [far_x, side_y, 0.0]]
+            )
+            quads.append((corners, np.array([0.0, 0.0, 1.0])))
+        triangles = [self._quads_to_mesh(quads).triangles]
+        if include_ladder:
+            triangles += [_box_triangles(*box) for box in self.ladder_boxes()]
+        return np.concatenate(triangles, axis=0)
+
+    def bounds_xy(self) -> tuple[np.ndarray, np.ndarray]:
+        """Top-view bounding box (min, max) of the evaluated walls."""
+        points = np.array([p for seg in self.segments for p in (seg.start, seg.end)])
+        return points.min(axis=0), points.max(axis=0)

@@ -1,0 +1,111 @@
+"""The Voronoi (Lloyd) and boustrophedon baselines."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+from trimesh.triangles import closest_point
+
+from maptidal.baselines import (
+    BoustrophedonParams,
+    VoronoiParams,
+    boustrophedon_viewpoints,
+    lane_heights,
+    lane_positions,
+    lloyd_relaxation,
+    quantisation_energy,
+    strip_samples,
+    voronoi_viewpoints,
+)
+from maptidal.raycast import first_hit_distances
+from maptidal.tank import TankModel
+
+
+def test_lloyd_lowers_the_quantisation_energy_and_converges():
+    params = VoronoiParams(n_seeds=12, margin_m=0.2, seed=4)
+    result = lloyd_relaxation(5.4, 2.0, params)
+    energies = np.array(result.energies)
+    assert result.converged
+    assert energies[-1] < 0.7 * energies[0]
+    assert np.all(np.diff(energies) <= 1e-12)  # never rises
+    assert np.all(result.seeds >= 0.2 - 1e-12)
+    assert np.all(result.seeds <= np.array([5.4 - 0.2, 2.0 - 0.2]) + 1e-12)
+
+
+def test_lloyd_seeds_end_near_their_cell_centroids():
+    params = VoronoiParams(n_seeds=6, margin_m=0.0, tolerance_m=1e-5, max_iterations=2000, seed=1)
+    result = lloyd_relaxation(3.0, 2.0, params)
+    samples = strip_samples(3.0, 2.0, params.sample_step_m)
+    _, owner = cKDTree(result.seeds).query(samples)
+    for k, seed in enumerate(result.seeds):
+        centroid = samples[owner == k].mean(axis=0)
+        assert np.linalg.norm(centroid - seed) < 1e-3
+    assert quantisation_energy(samples, result.seeds) == pytest.approx(result.energies[-1])
+
+
+def test_lloyd_rejects_a_margin_that_leaves_no_room():
+    with pytest.raises(ValueError, match="no room"):
+        lloyd_relaxation(1.0, 1.0, VoronoiParams(margin_m=0.6))
+
+
+def _check_viewpoints_look_at_the_wall(tank: TankModel, viewpoints: np.ndarray) -> None:
+    surface = tank.evaluated_surface()
+    # One metre off the wall, looking at it: the ray along the view hits the walls at about 1 m.
+    hits = first_hit_distances(viewpoints[:, :3], viewpoints[:, 3:], surface.triangles)
+    assert np.all(hits <= 1.0 + tank.config.window.recess + 1e-6)
+    assert np.all(hits >= 0.7)  # corners (bisector views) and the window recess sit a little nearer/farther
+    np.testing.assert_allclose(np.linalg.norm(viewpoints[:, 3:], axis=1), 1.0)
+    # Off the walls: no viewpoint is within 0.7 m of the surface, and all are inside the tank.
+    triangles = surface.triangles
+    distance = np.array(
+        [
+            np.linalg.norm(closest_point(triangles, np.repeat(p[None], len(triangles), 0)) - p, axis=1).min()
+            for p in viewpoints[:, :3]
+        ]
+    )
+    assert np.all(distance >= 0.7)
+    assert np.all(viewpoints[:, 0] < 0.0)
+    side_y = max(abs(seg.start[1]) for seg in tank.segments)
+    assert np.all(np.abs(viewpoints[:, 1]) < side_y)
+    assert np.all((viewpoints[:, 2] > 0.0) & (viewpoints[:, 2] < tank.height))
+
+
+def test_voronoi_viewpoints():
+    tank = TankModel()
+    viewpoints = voronoi_viewpoints(tank, VoronoiParams(seed=2))
+    assert viewpoints.shape == (20, 6)
+    _check_viewpoints_look_at_the_wall(tank, viewpoints)
+
+
+def test_boustrophedon_lanes_and_points():
+    tank = TankModel()
+    params = BoustrophedonParams()
+    spacing = params.lane_spacing()
+    assert spacing == pytest.approx(2 * math.tan(math.radians(28.5)) - 0.1)
+    heights = lane_heights(tank.height, params)
+    footprint = spacing + 0.1
+    # The lanes' footprints, overlapping by 0.1 m, cover the whole height.
+    assert heights[0] - footprint / 2 <= 0.0 and heights[-1] + footprint / 2 >= tank.height
+    np.testing.assert_allclose(np.diff(heights), spacing)
+    along = lane_positions(tank, params)
+    corners = tank.corner_s()
+    # Corners plus two points inside every section longer than 1 m (only the 2.4 m end wall).
+    assert len(along) == len(corners) + 2
+    assert set(np.round(corners, 9)) <= set(np.round(along, 9))
+    viewpoints = boustrophedon_viewpoints(tank, params)
+    assert len(viewpoints) == len(heights) * len(along)
+    _check_viewpoints_look_at_the_wall(tank, viewpoints)
+    # Boustrophedon: the second lane runs back the way the first came.
+    first, second = viewpoints[: len(along)], viewpoints[len(along) :]
+    np.testing.assert_allclose(first[:, :2], second[::-1, :2])
+
+
+def test_baselines_follow_another_tank():
+    from maptidal.tank import TankConfig
+
+    tank = TankModel(TankConfig(end_wall_width=6.0, water_depth=3.0))
+    viewpoints = boustrophedon_viewpoints(tank)
+    assert len(lane_heights(3.0, BoustrophedonParams())) == 3
+    _check_viewpoints_look_at_the_wall(tank, viewpoints)
+    _check_viewpoints_look_at_the_wall(tank, voronoi_viewpoints(tank))

@@ -1,0 +1,113 @@
+"""The tank config and the geometry built from it."""
+
+import math
+
+import numpy as np
+import pytest
+
+from maptidal.tank import (
+    DEFAULT_TANK_CONFIG,
+    TankConfig,
+    TankConfigError,
+    TankModel,
+    WindowConfig,
+    load_tank_config,
+    tank_config_from_dict,
+)
+
+
+def test_default_config_has_the_issues_dimensions():
+    config = load_tank_config()
+    assert config.end_wall_width == 2.4 and config.water_depth == 2.0
+    assert config.angled_length == 1.0 and config.angled_angle_deg == 45.0
+    assert config.side_length == 6.0 and config.side_evaluated_length == 0.5
+    window = config.window
+    assert (window.width, window.height, window.recess, window.centre_height) == (1.0, 0.6, 0.1, 1.0)
+    assert config.ladder.standoff == 0.15 and config.ladder.rails == 2
+
+
+def test_strip_and_segments_follow_the_top_view():
+    tank = TankModel(load_tank_config())
+    lengths = {seg.name: seg.length for seg in tank.segments}
+    assert lengths == pytest.approx(
+        {"side_left": 0.5, "angled_left": 1.0, "end": 2.4, "angled_right": 1.0, "side_right": 0.5}
+    )
+    assert tank.strip_length == pytest.approx(5.4)
+    angled = tank.segment("angled_left")
+    # 45 degrees between the angled wall and the end wall's plane.
+    assert math.degrees(math.acos(abs(angled.tangent @ tank.segment("end").tangent))) == pytest.approx(45.0)
+    # Inward normals point into the water: towards the tank's centre line and away from the end wall.
+    centre = np.array([-1.5, 0.0, 1.0])
+    for seg in tank.segments:
+        point, normal = tank.strip_to_world(seg.s0 + seg.length / 2, 1.0)
+        assert float((centre - point[0]) @ normal[0]) > 0.0
+
+
+def test_evaluated_surface_area_and_normals():
+    tank = TankModel()
+    surface = tank.evaluated_surface()
+    # Walls 5.4 x 2 m, the window hole replaced by its pane, plus four 0.1 m reveals.
+    expected = 5.4 * 2.0 + 2 * (1.0 + 0.6) * 0.1
+    assert surface.area == pytest.approx(expected)
+    # Every face's normal points to the water side: a short step along it stays in the tank.
+    inside = surface.triangles_center + 0.01 * surface.face_normals
+    assert np.all(inside[:, 0] < 0.1 + 1e-9)
+    assert np.all(surface.bounds[:, 2] == pytest.approx([0.0, 2.0]))
+
+
+def test_ladder_stands_off_the_end_wall_right_of_centre():
+    tank = TankModel()
+    boxes = tank.ladder_boxes()
+    rails = boxes[:2]
+    for centre, _half, _axes in rails:
+        assert centre[0] == pytest.approx(-0.15)  # axis 0.15 m off the wall plane x = 0
+        assert centre[1] < 0.0  # right of centre when facing the end wall is -y
+    assert len(boxes) > 2  # rungs
+
+
+@pytest.mark.parametrize(
+    ("document", "message"),
+    [
+        ({"water_depth": -1.0}, "water_depth"),
+        ({"end_wall": {"width": 0.0}}, "end_wall.width"),
+        ({"window": {"width": 3.0}}, "does not fit in the 2.4 m end wall"),
+        ({"window": {"height": 2.5}}, "does not fit in the 2.0 m wall height"),
+        ({"side_walls": {"evaluated_length": 7.0}}, "exceeds"),
+        ({"angled_walls": {"angle_deg": 120.0}}, "angle_deg"),
+        ({"ladder": {"centre_offset": 1.2}}, "does not fit on"),
+        ({"window": {"colour": "blue"}}, "unknown key 'colour'"),
+        ({"roof": 1}, "unknown key 'roof'"),
+        ({"fouling": [{"s": 1.0, "z": 1.0}]}, "radius"),
+        ({"fouling": [{"s": 1.0, "z": 1.0, "radius": -0.1}]}, "fouling.radius"),
+    ],
+)
+def test_bad_configs_get_a_clear_error(document, message):
+    with pytest.raises(TankConfigError, match=message):
+        tank_config_from_dict(document)
+
+
+def test_bad_files(tmp_path):
+    with pytest.raises(TankConfigError, match="not found"):
+        load_tank_config(tmp_path / "missing.toml")
+    broken = tmp_path / "broken.toml"
+    broken.write_text("water_depth = = 2\n")
+    with pytest.raises(TankConfigError, match="not valid TOML"):
+        load_tank_config(broken)
+
+
+def test_another_tank_rectangular_without_window(tmp_path):
+    path = tmp_path / "box.toml"
+    path.write_text(
+        'name = "box"\nwater_depth = 3.0\n[end_wall]\nwidth = 4.0\n[angled_walls]\nlength = 0.0\n'
+        "[side_walls]\nlength = 10.0\nevaluated_length = 1.0\n[window]\nwidth = 0.0\n[ladder]\nrails = 0\n"
+    )
+    tank = TankModel(load_tank_config(path))
+    assert [seg.name for seg in tank.segments] == ["side_left", "end", "side_right"]
+    assert tank.evaluated_surface().area == pytest.approx((1.0 + 4.0 + 1.0) * 3.0)
+    assert tank.ladder_boxes() == []
+
+
+def test_config_dataclass_validates_directly():
+    with pytest.raises(TankConfigError):
+        TankConfig(window=WindowConfig(width=1.0, height=0.0))
+    assert DEFAULT_TANK_CONFIG.is_file()
