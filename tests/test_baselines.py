@@ -33,6 +33,16 @@ def test_lloyd_lowers_the_quantisation_energy_and_converges():
     assert np.all(result.seeds <= np.array([5.4 - 0.2, 2.0 - 0.2]) + 1e-12)
 
 
+def test_wall_avoidance_margin_holds_where_centroids_would_cross_it():
+    # Free centroids of 20 cells on a 5.4 x 2 m strip lie about 0.3-0.5 m from the edges,
+    # so a 0.6 m margin must clamp some seeds onto the margin box.
+    result = lloyd_relaxation(5.4, 2.0, VoronoiParams(margin_m=0.6, seed=0))
+    low, high = np.array([0.6, 0.6]), np.array([4.8, 1.4])
+    assert np.all(result.seeds >= low - 1e-12) and np.all(result.seeds <= high + 1e-12)
+    on_box = np.isclose(result.seeds, low) | np.isclose(result.seeds, high)
+    assert on_box.any()
+
+
 def test_lloyd_seeds_end_near_their_cell_centroids():
     params = VoronoiParams(n_seeds=6, margin_m=0.0, tolerance_m=1e-5, max_iterations=2000, seed=1)
     result = lloyd_relaxation(3.0, 2.0, params)
