@@ -56,9 +56,12 @@ class LloydResult:
 
 def strip_samples(length: float, height: float, step: float) -> np.ndarray:
     """A regular grid of cell-centred samples ``(M, 2)`` over the strip."""
-    s = (np.arange(max(1, round(length / step))) + 0.5) * (length / max(1, round(length / step)))
-    z = (np.arange(max(1, round(height / step))) + 0.5) * (height / max(1, round(height / step)))
-    ss, zz = np.meshgrid(s, z, indexing="ij")
+
+    def centres(extent: float) -> np.ndarray:
+        cells = max(1, round(extent / step))
+        return (np.arange(cells) + 0.5) * (extent / cells)
+
+    ss, zz = np.meshgrid(centres(length), centres(height), indexing="ij")
     return np.column_stack([ss.ravel(), zz.ravel()])
 
 

@@ -29,8 +29,9 @@ import numpy as np
 import trimesh
 from scipy.stats import gamma
 
-from maptidal.geometry import CameraModel, _inside_local, _view_frames
+from maptidal.geometry import CameraModel, in_frustum
 from maptidal.raycast import visible_from
+from maptidal.tank import TankModel
 
 # Paper Sec. IV.C: peak at 2 views with alpha = 4 gives beta = 2 / (alpha - 1) = 2/3.
 IDEAL_GAMMA_ALPHA = 4.0
@@ -84,11 +85,8 @@ def views_per_point(
     counts = np.zeros(len(points), dtype=np.int64)
     if len(viewpoints) == 0 or len(points) == 0:
         return counts
-    frames = _view_frames(viewpoints)
-    columns = points.T
-    for viewpoint, frame in zip(viewpoints, frames, strict=True):
-        local = frame @ (columns - viewpoint[:3, None])
-        inside = _inside_local(local[0], local[1], local[2], camera)
+    for viewpoint in viewpoints:
+        inside = in_frustum(viewpoint, points, camera)
         if occluders is not None and inside.any():
             seen = np.flatnonzero(inside)
             inside[seen] = visible_from(viewpoint, points[seen], occluders, tolerance)
@@ -172,7 +170,7 @@ class CoverageModel:
     occluders: np.ndarray | None = None
 
     @classmethod
-    def from_tank(cls, tank, params: CoverageParams | None = None) -> CoverageModel:
+    def from_tank(cls, tank: TankModel, params: CoverageParams | None = None) -> CoverageModel:
         """Voxelise a :class:`maptidal.tank.TankModel`'s evaluated surface."""
         params = params or CoverageParams()
         occluders = tank.scene_triangles() if params.occlusion else None

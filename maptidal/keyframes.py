@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from maptidal.geometry import camera_axes
 from maptidal.perception.mesher import KeyframeMesh, MesherParams, kimera_mesh
 from maptidal.raycast import visible_from
 from maptidal.tank import TankModel
@@ -130,17 +131,9 @@ def tank_edges(tank: TankModel) -> list[tuple[np.ndarray, np.ndarray]]:
         edges.append((a, b))  # the floor line
         if k > 0:
             edges.append((a, a + tank.height * up))  # the corner with the previous wall
-    window = tank.config.window
-    if window.width > 0.0 and any(seg.name == "end" for seg in tank.segments):
-        seg = tank.segment("end")
-        t, n = seg.tangent, seg.inward_normal
-        centre = np.array([*seg.start, 0.0]) + (seg.length / 2 + window.centre_offset) * t
-        centre = centre + window.centre_height * up
-        for depth in (0.0, window.recess):
-            rim = [
-                centre - depth * n + sx * window.width / 2 * t + sz * window.height / 2 * up
-                for sx, sz in ((-1, -1), (1, -1), (1, 1), (-1, 1))
-            ]
+    if tank.has_window():
+        for depth in (0.0, tank.config.window.recess):
+            rim = tank.window_rim(depth)
             edges += [(rim[i], rim[(i + 1) % 4]) for i in range(4)]
     return edges
 
@@ -170,13 +163,6 @@ def tank_landmarks(tank: TankModel, features: FeatureParams | None = None) -> np
     return landmarks[landmarks[:, 2] <= tank.height]
 
 
-def camera_basis(forward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Right and up axes of a zero-roll camera looking along unit ``forward``."""
-    right = np.cross(forward, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    return right, np.cross(right, forward)
-
-
 def render_keyframe(
     tank_triangles: np.ndarray,
     landmarks: np.ndarray,
@@ -189,7 +175,7 @@ def render_keyframe(
     """Keypoints and mesh of the landmarks a stereo camera at this pose would track."""
     position, forward = np.asarray(position, float), np.asarray(forward, float)
     forward = forward / np.linalg.norm(forward)
-    right, up = camera_basis(forward)
+    right, up = (axis[0] for axis in camera_axes(forward[None, :]))
     offsets = landmarks - position
     z, x, y = offsets @ forward, offsets @ right, offsets @ up
     with np.errstate(divide="ignore", invalid="ignore"):

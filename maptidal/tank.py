@@ -303,11 +303,6 @@ class TankModel:
         """Strip coordinates of the section corners, both ends included."""
         return np.array([seg.s0 for seg in self.segments] + [self.strip_length])
 
-    def end_wall_s(self, offset: float) -> float:
-        """Strip coordinate of a point ``offset`` m along the end wall from its centre."""
-        end = self.segment("end")
-        return end.s0 + end.length / 2 + offset
-
     def strip_to_world(self, s: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Map strip coordinates to wall points ``(N, 3)`` and inward normals ``(N, 3)``.
 
@@ -333,48 +328,66 @@ class TankModel:
         return points, normals
 
     # ----- surfaces -----------------------------------------------------------------
-    def _wall_quads(self, seg: WallSegment, z_top: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    def window_rim(self, depth: float = 0.0) -> np.ndarray:
+        """Corners ``(4, 3)`` of the window opening, ``depth`` m behind the wall plane:
+        bottom-left, bottom-right, top-right, top-left (left/right facing the end wall)."""
+        window = self.config.window
+        seg = self.segment("end")
+        t, n, up = seg.tangent, seg.inward_normal, np.array([0.0, 0.0, 1.0])
+        centre = np.array([*seg.start, 0.0]) + (seg.length / 2 + window.centre_offset) * t
+        centre = centre + window.centre_height * up - depth * n
+        return np.array(
+            [
+                centre + sx * window.width / 2 * t + sz * window.height / 2 * up
+                for sx, sz in ((-1, -1), (1, -1), (1, 1), (-1, 1))
+            ]
+        )
+
+    def has_window(self) -> bool:
+        """Whether the config has a window and the strip an end wall to hold it."""
+        return self.config.window.width > 0.0 and any(seg.name == "end" for seg in self.segments)
+
+    def _wall_quads(self, seg: WallSegment) -> list[tuple[np.ndarray, np.ndarray]]:
         """Quads (4 corners, wanted normal) covering one wall, with the window hole cut out."""
         p0 = np.array([*seg.start, 0.0])
         t, n = seg.tangent, seg.inward_normal
         up = np.array([0.0, 0.0, 1.0])
 
-        def quad(u0: float, u1: float, z0: float, z1: float, depth: float = 0.0, normal=n):
-            base = p0 - depth * n
-            corners = [base + u * t + z * up for u, z in ((u0, z0), (u1, z0), (u1, z1), (u0, z1))]
-            return np.array(corners), normal
+        def quad(u0: float, u1: float, z0: float, z1: float):
+            corners = [p0 + u * t + z * up for u, z in ((u0, z0), (u1, z0), (u1, z1), (u0, z1))]
+            return np.array(corners), n
 
+        if seg.name != "end" or not self.has_window():
+            return [quad(0.0, seg.length, 0.0, self.height)]
         window = self.config.window
-        if seg.name != "end" or window.width <= 0.0:
-            return [quad(0.0, seg.length, 0.0, z_top)]
         u_c = seg.length / 2 + window.centre_offset
         u0, u1 = u_c - window.width / 2, u_c + window.width / 2
         z0, z1 = window.centre_height - window.height / 2, window.centre_height + window.height / 2
         quads = [
-            quad(0.0, u0, 0.0, z_top),
-            quad(u1, seg.length, 0.0, z_top),
+            quad(0.0, u0, 0.0, self.height),
+            quad(u1, seg.length, 0.0, self.height),
             quad(u0, u1, 0.0, z0),
-            quad(u0, u1, z1, z_top),
-            quad(u0, u1, z0, z1, depth=window.recess),  # the pane, at the back of the recess
+            quad(u0, u1, z1, self.height),
+            (self.window_rim(window.recess), n),  # the pane, at the back of the recess
         ]
         if window.recess > 0.0:
+            bl, br, tr, tl = self.window_rim()
             r = window.recess
 
             def reveal(a: np.ndarray, b: np.ndarray, normal: np.ndarray):
                 # A side of the recess: from edge a-b on the wall plane back to the pane.
                 return np.array([a, b, b - r * n, a - r * n]), normal
 
-            corner = {
-                key: p0 + u * t + z * up
-                for key, (u, z) in {"bl": (u0, z0), "br": (u1, z0), "tr": (u1, z1), "tl": (u0, z1)}.items()
-            }
             quads += [
-                reveal(corner["bl"], corner["br"], up),  # sill faces up
-                reveal(corner["tl"], corner["tr"], -up),  # head faces down
-                reveal(corner["bl"], corner["tl"], t),  # left jamb faces +t
-                reveal(corner["br"], corner["tr"], -t),  # right jamb faces -t
+                reveal(bl, br, up),  # sill faces up
+                reveal(tl, tr, -up),  # head faces down
+                reveal(bl, tl, t),  # left jamb faces +t
+                reveal(br, tr, -t),  # right jamb faces -t
             ]
         return quads
+
+    def _evaluated_quads(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        return [quad for seg in self.segments for quad in self._wall_quads(seg)]
 
     @staticmethod
     def _quads_to_mesh(quads: list[tuple[np.ndarray, np.ndarray]]) -> trimesh.Trimesh:
@@ -388,10 +401,7 @@ class TankModel:
 
     def evaluated_surface(self) -> trimesh.Trimesh:
         """The evaluated walls and window recess, normals towards the water (paper Sec. IV.B)."""
-        quads = []
-        for seg in self.segments:
-            quads += self._wall_quads(seg, self.height)
-        return self._quads_to_mesh(quads)
+        return self._quads_to_mesh(self._evaluated_quads())
 
     def ladder_boxes(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """The ladder as boxes ``(centre, half sizes, axes rows)``: rails, then rungs."""
@@ -422,9 +432,7 @@ class TankModel:
         modelled end of the tank and the ladder; the water surface is left out.
         """
         c = self.config
-        quads = []
-        for seg in self.segments:
-            quads += self._wall_quads(seg, self.height)
+        quads = self._evaluated_quads()
         far_x = min(float(seg.start[0]) for seg in self.segments) - (c.side_length - c.side_evaluated_length)
         near_x = min(float(min(seg.start[0], seg.end[0])) for seg in self.segments)
         side_y = max(abs(float(seg.start[1])) for seg in self.segments)
@@ -443,8 +451,3 @@ class TankModel:
         if include_ladder:
             triangles += [_box_triangles(*box) for box in self.ladder_boxes()]
         return np.concatenate(triangles, axis=0)
-
-    def bounds_xy(self) -> tuple[np.ndarray, np.ndarray]:
-        """Top-view bounding box (min, max) of the evaluated walls."""
-        points = np.array([p for seg in self.segments for p in (seg.start, seg.end)])
-        return points.min(axis=0), points.max(axis=0)

@@ -4,8 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from geometry_oracles import distances_to_triangles
 from scipy.spatial import cKDTree
-from trimesh.triangles import closest_point
 
 from maptidal.baselines import (
     BoustrophedonParams,
@@ -67,13 +67,7 @@ def _check_viewpoints_look_at_the_wall(tank: TankModel, viewpoints: np.ndarray) 
     assert np.all(hits >= 0.7)  # corners (bisector views) and the window recess sit a little nearer/farther
     np.testing.assert_allclose(np.linalg.norm(viewpoints[:, 3:], axis=1), 1.0)
     # Off the walls: no viewpoint is within 0.7 m of the surface, and all are inside the tank.
-    triangles = surface.triangles
-    distance = np.array(
-        [
-            np.linalg.norm(closest_point(triangles, np.repeat(p[None], len(triangles), 0)) - p, axis=1).min()
-            for p in viewpoints[:, :3]
-        ]
-    )
+    distance = distances_to_triangles(viewpoints[:, :3], surface.triangles)
     assert np.all(distance >= 0.7)
     assert np.all(viewpoints[:, 0] < 0.0)
     side_y = max(abs(seg.start[1]) for seg in tank.segments)
