@@ -29,7 +29,7 @@ import numpy as np
 import trimesh
 from scipy.stats import gamma
 
-from maptidal.geometry import CameraModel, in_frustum
+from maptidal.geometry import CameraModel, frustum_masks
 from maptidal.raycast import visible_from
 from maptidal.tank import TankModel
 
@@ -85,8 +85,7 @@ def views_per_point(
     counts = np.zeros(len(points), dtype=np.int64)
     if len(viewpoints) == 0 or len(points) == 0:
         return counts
-    for viewpoint in viewpoints:
-        inside = in_frustum(viewpoint, points, camera)
+    for viewpoint, inside in zip(viewpoints, frustum_masks(viewpoints, points, camera), strict=True):
         if occluders is not None and inside.any():
             seen = np.flatnonzero(inside)
             inside[seen] = visible_from(viewpoint, points[seen], occluders, tolerance)
