@@ -14,11 +14,13 @@ export PYOPENGL_PLATFORM ?= egl
 setup: $(STAMP)
 
 # Idempotent: reinstalls only when the pins or the package metadata change.
-$(STAMP): pyproject.toml requirements.lock
+$(STAMP): pyproject.toml requirements.lock envs/_hydro.c
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -r requirements.lock
 	$(BIN)/python -m pip install -q --no-deps -e .
+	# compile the C hydrodynamics callback (falls back to numpy when there is no compiler)
+	$(BIN)/python -c "from envs.hydrodynamics import build_native; print('hydrodynamics library:', build_native())"
 	touch $(STAMP)
 
 run: setup
@@ -30,6 +32,7 @@ test: setup
 bench: setup
 	$(BIN)/python tests/bench/bench_discovery.py
 	$(BIN)/python tests/bench/bench_coverage.py
+	$(BIN)/python tests/bench/bench_sim.py
 
 lint: setup
 	$(BIN)/ruff check maptidal envs controllers tests

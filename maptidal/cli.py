@@ -15,11 +15,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
+
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams
+from maptidal.files import atomic_write_bytes
+from maptidal.progress import ProgressBar
 from maptidal.tank import TankConfigError
 
 EXIT_BAD_INPUT = 2
@@ -251,6 +257,99 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_sim_parser(commands) -> None:
+    """Register the ``sim`` subcommand on the CLI's subparsers."""
+    sim = commands.add_parser(
+        "sim",
+        help="run the MuJoCo world headless with a constant pilot command",
+        description="Load a scenario, hold a normalised 6-DOF pilot command (surge, sway, heave, roll, "
+        "pitch, yaw in [-1, 1], ArduSub's meaning) on every robot for the duration, and print the final "
+        "ground-truth state of the first robot with the run's speed.",
+    )
+    sim.add_argument(
+        "--scenario", metavar="FILE", help="scenario TOML (default assets/scenarios/default.toml)"
+    )
+    sim.add_argument(
+        "--frame", choices=("heavy", "standard"), help="switch every robot to this BlueROV2 frame"
+    )
+    sim.add_argument(
+        "--command", default="", metavar="AXIS=V,...", help="e.g. surge=1.0,heave=-0.2 (default idle)"
+    )
+    sim.add_argument(
+        "--duration", type=float, default=5.0, metavar="S", help="simulated seconds (default %(default)s)"
+    )
+    sim.add_argument("--render-dir", metavar="DIR", help="save stereo pairs (PNG) into DIR")
+    sim.add_argument(
+        "--render-every",
+        type=int,
+        default=25,
+        metavar="N",
+        help="control steps between saved pairs (default %(default)s)",
+    )
+    sim.add_argument("--seed", type=int, default=0, help="noise seed (default %(default)s)")
+    sim.add_argument("--json", action="store_true", help="print the result as JSON")
+    sim.set_defaults(handler=_cmd_sim)
+
+
+def _cmd_sim(args: argparse.Namespace) -> int:
+    """Handler of ``maptidal sim``; returns the exit status."""
+    import cv2
+
+    from controllers.convention import parse_command
+    from envs.scenario import load_scenario, with_frame
+    from envs.simulation import Simulation
+
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        raise ValueError(f"--duration must be a positive number of seconds, got {args.duration}")
+    command = parse_command(args.command)
+    scenario = load_scenario(args.scenario)
+    if args.frame:
+        scenario = with_frame(scenario, args.frame)
+    sim = Simulation(scenario)
+    sim.reset(seed=args.seed)
+    steps = max(1, round(args.duration / (scenario.substeps * scenario.timestep_s)))
+    render_dir = Path(args.render_dir) if args.render_dir else None
+    if render_dir:
+        render_dir.mkdir(parents=True, exist_ok=True)
+    commands = {robot: command for robot in sim.robots}
+    progress = ProgressBar(steps, "sim", enabled=not args.json)
+    start = time.perf_counter()
+    for k in range(steps):
+        sim.step(commands)
+        if render_dir and k % args.render_every == 0:
+            for robot in sim.robots:
+                left, right = sim.render_stereo(robot)
+                _ok, png = cv2.imencode(".png", np.hstack([left, right])[..., ::-1])
+                atomic_write_bytes(render_dir / f"{robot}_{k:05d}.png", png.tobytes())
+        progress.advance()
+    wall = time.perf_counter() - start
+    truth = sim.ground_truth(sim.robots[0])
+    physics_steps = steps * scenario.substeps
+    result = {
+        "robot": sim.robots[0],
+        "position": truth["position"],
+        "velocity_body": truth["velocity_body"],
+        "rpy": truth["rpy"],
+        "sim_time_s": sim.time,
+        "steps_per_s": physics_steps / sim.wall_time_s if sim.wall_time_s > 0 else float("inf"),
+        "realtime_factor": sim.time / wall if wall > 0 else float("inf"),
+        "hydrodynamics": sim.backend,
+    }
+    if args.json:
+        print(json.dumps(result))
+    else:
+        p, v, rpy = (np.round(result[k], 3).tolist() for k in ("position", "velocity_body", "rpy"))
+        print(
+            f"{result['robot']} after {result['sim_time_s']:.2f} s: position {p} m, body velocity {v} m/s, "
+            f"rpy {np.round(np.degrees(rpy), 1).tolist()} deg"
+        )
+        print(
+            f"{result['steps_per_s']:.0f} physics steps/s, {result['realtime_factor']:.1f}x real time "
+            f"({result['hydrodynamics']} hydrodynamics)"
+        )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``maptidal`` command and its subcommands."""
     parser = argparse.ArgumentParser(
@@ -351,6 +450,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     _add_discovery_params(demo)
     demo.set_defaults(handler=_cmd_demo)
+    _add_sim_parser(commands)
     return parser
 
 
@@ -360,7 +460,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.handler(args)
-    except (DiscoveryInputError, TankConfigError, ValueError) as err:
+    except (DiscoveryInputError, TankConfigError, ValueError, KeyError) as err:
         print(f"maptidal {args.command}: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
 

@@ -425,14 +425,24 @@ class TankModel:
             z += ladder.rung_spacing
         return boxes
 
-    def scene_triangles(self, include_floor: bool = True, include_ladder: bool = True) -> np.ndarray:
-        """Every surface a camera in the water can see, as triangles ``(T, 3, 3)``.
+    def scene_quads(self, include_floor: bool = True) -> list[tuple[np.ndarray, np.ndarray, str]]:
+        """Every flat surface a camera in the water can see: ``(corners (4, 3), normal, kind)``.
 
-        The whole side walls (not only their evaluated part), the floor under the
-        modelled end of the tank and the ladder; the water surface is left out.
+        ``kind`` is "wall", "pane" (the window glass), "reveal" (the window recess
+        sides) or "floor". The whole side walls are included, not only their
+        evaluated part, and the floor under the modelled end of the tank; the water
+        surface and the ladder (see :meth:`ladder_boxes`) are not.
         """
         c = self.config
-        quads = self._evaluated_quads()
+        quads: list[tuple[np.ndarray, np.ndarray, str]] = []
+        for seg in self.segments:
+            for k, (corners, normal) in enumerate(self._wall_quads(seg)):
+                kind = "wall"
+                if seg.name == "end" and self.has_window() and k == 4:
+                    kind = "pane"
+                elif seg.name == "end" and self.has_window() and k > 4:
+                    kind = "reveal"
+                quads.append((corners, normal, kind))
         far_x = min(float(seg.start[0]) for seg in self.segments) - (c.side_length - c.side_evaluated_length)
         near_x = min(float(min(seg.start[0], seg.end[0])) for seg in self.segments)
         side_y = max(abs(float(seg.start[1])) for seg in self.segments)
@@ -441,12 +451,20 @@ class TankModel:
                 a = np.array([near_x, sign * side_y, 0.0])
                 b = np.array([far_x, sign * side_y, 0.0])
                 corners = np.array([a, b, b + [0, 0, self.height], a + [0, 0, self.height]])
-                quads.append((corners, np.array([0.0, -sign, 0.0])))
+                quads.append((corners, np.array([0.0, -sign, 0.0]), "wall"))
         if include_floor:
             corners = np.array(
                 [[far_x, -side_y, 0.0], [0.0, -side_y, 0.0], [0.0, side_y, 0.0], [far_x, side_y, 0.0]]
             )
-            quads.append((corners, np.array([0.0, 0.0, 1.0])))
+            quads.append((corners, np.array([0.0, 0.0, 1.0]), "floor"))
+        return quads
+
+    def scene_triangles(self, include_floor: bool = True, include_ladder: bool = True) -> np.ndarray:
+        """Every surface a camera in the water can see, as triangles ``(T, 3, 3)``.
+
+        The surfaces of :meth:`scene_quads` plus, optionally, the ladder.
+        """
+        quads = [(corners, normal) for corners, normal, _ in self.scene_quads(include_floor)]
         triangles = [self._quads_to_mesh(quads).triangles]
         if include_ladder:
             triangles += [_box_triangles(*box) for box in self.ladder_boxes()]

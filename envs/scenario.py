@@ -1,0 +1,221 @@
+"""Scenario files (TOML): the tank, the robots with their sensors, the water and the physics rate.
+
+HoloOcean-style: a scenario names everything a run needs. Example and every key:
+``assets/scenarios/default.toml``. A bad scenario raises :class:`ScenarioError`
+naming the value (unknown frame or sensor, a robot outside the tank, a negative
+mass, unknown keys), never a crash deep inside MuJoCo.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from envs.sensors import SENSORS, SensorNoise
+from envs.vehicle import FRAMES, VehicleConfigError, VehicleParams, load_vehicle
+from envs.water import WaterParams
+from maptidal.tank import DEFAULT_TANK_CONFIG, TankConfigError, TankModel, load_tank_config
+
+ASSETS = Path(__file__).resolve().parent.parent / "assets"
+SCENARIO_DIR = ASSETS / "scenarios"
+DEFAULT_SCENARIO = SCENARIO_DIR / "default.toml"
+HULL_MARGIN_M = 0.3  # a start pose must leave this much water around the CG
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be simulated; the message says which value and why."""
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """One robot of a scenario: name, vehicle parameters, start pose and enabled sensors."""
+
+    name: str
+    vehicle: VehicleParams
+    position: tuple[float, float, float]
+    yaw_deg: float = 0.0
+    sensors: tuple[str, ...] = SENSORS
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything a simulation needs; build it with :func:`load_scenario` or directly."""
+
+    name: str
+    tank: TankModel
+    robots: tuple[RobotSpec, ...]
+    timestep_s: float = 0.002
+    control_period_s: float = 0.02
+    water: WaterParams = field(default_factory=WaterParams)
+    current: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    noise: SensorNoise = field(default_factory=SensorNoise)
+
+    @property
+    def substeps(self) -> int:
+        """Physics steps per control period."""
+        return max(1, round(self.control_period_s / self.timestep_s))
+
+
+def _require(condition: bool, message: str) -> None:
+    if not condition:
+        raise ScenarioError(message)
+
+
+def _check_keys(table: dict, allowed: set[str], where: str) -> None:
+    for key in table:
+        _require(key in allowed, f"unknown key {key!r} in {where}; allowed: {', '.join(sorted(allowed))}")
+
+
+def _vector(value, where: str, size: int = 3) -> tuple[float, ...]:
+    ok = isinstance(value, list | tuple) and len(value) == size
+    ok = ok and all(isinstance(v, int | float) and math.isfinite(v) for v in value)
+    _require(ok, f"{where} must be {size} finite numbers, got {value!r}")
+    return tuple(float(v) for v in value)
+
+
+def inside_tank(tank: TankModel, point: np.ndarray, margin: float = 0.0) -> bool:
+    """Whether ``point`` lies in the tank's water, at least ``margin`` from walls, floor and surface."""
+    x, y, z = (float(v) for v in point)
+    if not margin <= z <= tank.height - margin:
+        return False
+    c = tank.config
+    far_x = min(float(seg.start[0]) for seg in tank.segments) - (c.side_length - c.side_evaluated_length)
+    if x < far_x + margin:
+        return False
+    # inside every wall's half-plane (the walls of the modelled end form a convex outline)
+    for seg in tank.segments:
+        offset = np.dot(np.array([x, y]) - seg.start, seg.inward_normal[:2])
+        if offset < margin:
+            return False
+    return True
+
+
+def _tank_from(value, base: Path) -> TankModel:
+    if value in (None, "osb_tank"):
+        path = DEFAULT_TANK_CONFIG
+    else:
+        path = Path(value)
+        if not path.is_absolute():
+            path = (base / path) if (base / path).exists() else ASSETS / str(value) / "tank.toml"
+    try:
+        return TankModel(load_tank_config(path))
+    except TankConfigError as err:
+        raise ScenarioError(f"tank: {err}") from None
+
+
+def scenario_from_dict(document: dict, base: Path | None = None) -> Scenario:
+    """Build and validate a :class:`Scenario` from a parsed TOML document."""
+    base = base or SCENARIO_DIR
+    _check_keys(document, {"name", "tank", "physics", "water", "robots", "sensor_noise"}, "the scenario")
+    tank = _tank_from(document.get("tank"), base)
+    physics = document.get("physics", {})
+    _check_keys(physics, {"timestep_s", "control_period_s"}, "[physics]")
+    timestep = physics.get("timestep_s", 0.002)
+    period = physics.get("control_period_s", 0.02)
+    _require(
+        isinstance(timestep, int | float) and 1e-4 <= timestep <= 0.02,
+        f"physics.timestep_s must be in [0.0001, 0.02] s, got {timestep!r}",
+    )
+    _require(
+        isinstance(period, int | float) and period >= timestep,
+        f"physics.control_period_s must be >= timestep_s, got {period!r}",
+    )
+    water_table = dict(document.get("water", {}))
+    _check_keys(water_table, {"current", "turbidity", "noise_sigma", "vignetting", "enabled"}, "[water]")
+    current = _vector(water_table.pop("current", [0.0, 0.0, 0.0]), "water.current")
+    try:
+        water = WaterParams(**water_table)
+    except (TypeError, ValueError) as err:
+        raise ScenarioError(f"[water]: {err}") from None
+    try:
+        noise = SensorNoise(**document.get("sensor_noise", {}))
+    except (TypeError, ValueError) as err:
+        raise ScenarioError(f"[sensor_noise]: {err}") from None
+    robots_table = document.get("robots", [])
+    _require(
+        isinstance(robots_table, list) and robots_table, "a scenario needs at least one [[robots]] entry"
+    )
+    robots, names = [], set()
+    for k, entry in enumerate(robots_table):
+        robots.append(_robot_from(entry, k, tank))
+        _require(robots[-1].name not in names, f"robot name {robots[-1].name!r} is used twice")
+        names.add(robots[-1].name)
+    return Scenario(
+        name=str(document.get("name", "scenario")),
+        tank=tank,
+        robots=tuple(robots),
+        timestep_s=float(timestep),
+        control_period_s=float(period),
+        water=water,
+        current=current,
+        noise=noise,
+    )
+
+
+_VEHICLE_OVERRIDES = {
+    "mass",
+    "buoyancy_n",
+    "inertia",
+    "added_mass",
+    "linear_damping",
+    "quadratic_damping",
+    "added_mass_coriolis",
+}
+
+
+def _robot_from(entry: dict, index: int, tank: TankModel) -> RobotSpec:
+    where = f"robots[{index}]"
+    _require(isinstance(entry, dict), f"{where} must be a table")
+    _check_keys(entry, {"name", "frame", "position", "yaw_deg", "sensors"} | _VEHICLE_OVERRIDES, where)
+    name = str(entry.get("name", f"rov{index}"))
+    _require(name.isidentifier(), f"{where}.name must be a plain identifier, got {name!r}")
+    frame = entry.get("frame", "heavy")
+    _require(frame in FRAMES, f"{where}.frame: unknown frame {frame!r}; choose one of {', '.join(FRAMES)}")
+    overrides = {key: entry[key] for key in _VEHICLE_OVERRIDES if key in entry}
+    overrides = {k: tuple(v) if isinstance(v, list) else v for k, v in overrides.items()}
+    try:
+        vehicle = load_vehicle(frame, **overrides)
+    except VehicleConfigError as err:
+        raise ScenarioError(f"{where}: {err}") from None
+    position = _vector(entry.get("position"), f"{where}.position")
+    _require(
+        inside_tank(tank, np.array(position), HULL_MARGIN_M),
+        f"{where}.position {list(position)} is outside the tank's water "
+        f"(or within {HULL_MARGIN_M} m of a wall, the floor or the surface)",
+    )
+    yaw = entry.get("yaw_deg", 0.0)
+    _require(isinstance(yaw, int | float) and math.isfinite(yaw), f"{where}.yaw_deg must be a finite number")
+    sensors = entry.get("sensors", list(SENSORS))
+    _require(isinstance(sensors, list), f"{where}.sensors must be a list")
+    for sensor in sensors:
+        _require(
+            sensor in SENSORS, f"{where}.sensors: unknown sensor {sensor!r}; known: {', '.join(SENSORS)}"
+        )
+    return RobotSpec(name, vehicle, position, float(yaw), tuple(sensors))
+
+
+def load_scenario(path: str | Path | None = None) -> Scenario:
+    """Read a scenario TOML (default ``assets/scenarios/default.toml``; a bare name looks there)."""
+    path = Path(path) if path is not None else DEFAULT_SCENARIO
+    if not path.exists() and (SCENARIO_DIR / f"{path}.toml").exists():
+        path = SCENARIO_DIR / f"{path}.toml"
+    _require(path.is_file(), f"scenario not found: {path}")
+    try:
+        document = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ScenarioError(f"{path}: not valid TOML ({err})") from None
+    try:
+        return scenario_from_dict(document, path.parent)
+    except ScenarioError as err:
+        raise ScenarioError(f"{path}: {err}") from None
+
+
+def with_frame(scenario: Scenario, frame: str) -> Scenario:
+    """The same scenario with every robot switched to ``frame`` ("heavy" or "standard")."""
+    _require(frame in FRAMES, f"unknown frame {frame!r}; choose one of {', '.join(FRAMES)}")
+    robots = tuple(replace(robot, vehicle=load_vehicle(frame)) for robot in scenario.robots)
+    return replace(scenario, robots=robots)

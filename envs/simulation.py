@@ -1,0 +1,275 @@
+"""The simulation API: load a scenario, step robots with pilot or thruster commands, read sensors.
+
+Example::
+
+    from envs.simulation import Simulation
+    sim = Simulation("assets/scenarios/default.toml")
+    sim.reset(seed=1)
+    for _ in range(100):
+        sim.step({"rov0": {"surge": 0.5}})
+    print(sim.ground_truth("rov0")["position"], sim.sensors("rov0")["depth"])
+    left, right = sim.render_stereo("rov0")
+
+Commands are the normalised 6-DOF pilot command of :mod:`controllers.convention`,
+mixed into thruster commands by ArduSub's mixer for the robot's frame; pass
+``mode="thrusters"`` to command each thruster directly (M1 first, in [-1, 1]).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from controllers.convention import pilot_command
+from controllers.mixing import MixerParams, mix
+from envs import hydrodynamics
+from envs.rendering import render_camera
+from envs.scenario import Scenario, load_scenario
+from envs.sensors import RobotSensors
+from envs.water import WaterModel, depth_to_range
+from envs.world import RobotPlacement, compose
+from maptidal.keyframes import StereoCameraParams
+
+
+class SimulationError(RuntimeError):
+    """The physics went bad (NaN or diverging state); the message says when and for whom."""
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A contact involving a robot: which robot, what it touches, where, and the normal force (N)."""
+
+    robot: str
+    other: str
+    position: tuple[float, float, float]
+    normal_force_n: float
+
+
+class Simulation:
+    """A scenario running in MuJoCo with Fossen hydrodynamics, thrusters, sensors and cameras."""
+
+    def __init__(
+        self,
+        scenario: Scenario | str | Path | None = None,
+        camera: StereoCameraParams | None = None,
+        hydrodynamics_backend: str = "native",
+    ) -> None:
+        self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        self.camera = camera or StereoCameraParams()
+        self.backend = hydrodynamics.install_callback(prefer_native=hydrodynamics_backend == "native")
+        placements = [
+            RobotPlacement(r.name, r.vehicle, r.position, math.radians(r.yaw_deg))
+            for r in self.scenario.robots
+        ]
+        spec = compose(self.scenario.tank, placements, self.scenario.timestep_s, camera=self.camera)
+        self.model = spec.compile()
+        self.data = mujoco.MjData(self.model)
+        self.robots = [r.name for r in self.scenario.robots]
+        self._specs = {r.name: r for r in self.scenario.robots}
+        self._slots: dict[str, hydrodynamics.RobotSlot] = {}
+        self._sensors: dict[str, RobotSensors] = {}
+        self._mixers: dict[str, MixerParams] = {}
+        for robot in self.scenario.robots:
+            body = self.model.body(f"{robot.name}/base")
+            joint = self.model.joint(f"{robot.name}/root")
+            actuator = self.model.actuator(f"{robot.name}/thruster1")
+            self._slots[robot.name] = hydrodynamics.RobotSlot(
+                int(body.id), int(joint.dofadr[0]), int(self.model.actuator_actadr[actuator.id])
+            )
+            mounts = robot.vehicle.sensors
+            self._sensors[robot.name] = RobotSensors(
+                self.model,
+                f"{robot.name}/",
+                robot.sensors,
+                self.scenario.noise,
+                (mounts.dvl_min_range_m, mounts.dvl_max_range_m),
+                self.scenario.tank.height,
+            )
+            self._mixers[robot.name] = MixerParams(frame=robot.vehicle.ardusub_frame)
+        self.water = WaterModel(self.scenario.water)
+        self._ray_scale: np.ndarray | None = None
+        self.rng = np.random.default_rng()
+        self.wall_time_s = 0.0
+        self.reset()
+
+    # ----- state ------------------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        """Simulated time (s) since reset."""
+        return float(self.data.time)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Put every robot back at its start pose, at rest, thrusters idle; reseed the noise."""
+        mujoco.mj_resetData(self.model, self.data)
+        self.rng = np.random.default_rng(seed)
+        hydrodynamics.pack_userdata(
+            self.data.userdata,
+            [self._slots[name] for name in self.robots],
+            [self._specs[name].vehicle for name in self.robots],
+            np.asarray(self.scenario.current),
+            water_surface_z=self.scenario.tank.height,
+        )
+        for sensors in self._sensors.values():
+            sensors.reset(self.rng)
+        mujoco.mj_forward(self.model, self.data)
+        self.wall_time_s = 0.0
+
+    def set_hydrodynamics(self, enabled: bool) -> None:
+        """Switch hydrodynamics and thrust on or off (off: a bare rigid body, for baselines)."""
+        hydrodynamics.set_enabled(self.data.userdata, enabled)
+
+    # ----- acting -----------------------------------------------------------------------
+    def thruster_commands(self, robot: str, command, mode: str = "pilot") -> np.ndarray:
+        """The per-thruster commands in [-1, 1] that ``command`` gives for ``robot``."""
+        n = self._specs[robot].vehicle.n_thrusters
+        if mode == "pilot":
+            return mix(pilot_command(command), self._mixers[robot])
+        if mode == "thrusters":
+            values = np.asarray(command, float)
+            if values.shape != (n,) or not np.all(np.isfinite(values)):
+                raise ValueError(f"{robot}: expected {n} finite thruster commands, got {values.tolist()}")
+            return np.clip(values, -1.0, 1.0)
+        raise ValueError(f"mode must be 'pilot' or 'thrusters', got {mode!r}")
+
+    def step(self, commands: Mapping[str, object] | None = None, mode: str = "pilot") -> float:
+        """Hold ``commands`` (robot name to command) for one control period; returns the new time.
+
+        Robots without a command keep their last one. Raises :class:`SimulationError`
+        if the state becomes NaN or MuJoCo reports a diverging acceleration.
+        """
+        for robot, command in (commands or {}).items():
+            if robot not in self._slots:
+                raise KeyError(f"unknown robot {robot!r}; robots: {', '.join(self.robots)}")
+            actuator = self.model.actuator(f"{robot}/thruster1").id
+            thrusters = self.thruster_commands(robot, command, mode)
+            self.data.ctrl[actuator : actuator + len(thrusters)] = thrusters
+        bad_before = self._instability_warnings()
+        start = time.perf_counter()
+        mujoco.mj_step(self.model, self.data, nstep=self.scenario.substeps)
+        self.wall_time_s += time.perf_counter() - start
+        period = self.scenario.substeps * self.scenario.timestep_s
+        for sensors in self._sensors.values():
+            sensors.advance(period, self.rng)
+        diverged = self._instability_warnings() > bad_before
+        if diverged or not (np.all(np.isfinite(self.data.qpos)) and np.all(np.isfinite(self.data.qvel))):
+            raise SimulationError(
+                f"the physics state became NaN or diverged at t = {self.time:.3f} s; "
+                f"last thruster commands {self.data.ctrl.round(3).tolist()}. Reset the simulation."
+            )
+        return self.time
+
+    def _instability_warnings(self) -> int:
+        # MuJoCo resets the state itself on a bad qpos/qvel/qacc and counts a warning
+        kinds = (
+            mujoco.mjtWarning.mjWARN_BADQPOS,
+            mujoco.mjtWarning.mjWARN_BADQVEL,
+            mujoco.mjtWarning.mjWARN_BADQACC,
+        )
+        return sum(int(self.data.warning[kind].number) for kind in kinds)
+
+    # ----- reading ----------------------------------------------------------------------
+    def sensors(self, robot: str) -> dict:
+        """Noisy readings of the robot's enabled sensors (imu, depth, dvl, compass)."""
+        return self._sensors[self._check(robot)].read(self.data, self.rng)
+
+    def ground_truth(self, robot: str) -> dict:
+        """The true state, flagged as such: position, quaternion (w, x, y, z), roll-pitch-yaw,
+        body-frame linear and angular velocity, and the lagged thruster states."""
+        slot = self._slots[self._check(robot)]
+        rotation = self.data.xmat[slot.body_id].reshape(3, 3)
+        quat = self.data.xquat[slot.body_id]
+        n = self._specs[robot].vehicle.n_thrusters
+        return {
+            "ground_truth": True,
+            "position": self.data.xpos[slot.body_id].tolist(),
+            "quaternion": quat.tolist(),
+            "rpy": list(rpy_from_matrix(rotation)),
+            "velocity_body": (rotation.T @ self.data.qvel[slot.dof_adr : slot.dof_adr + 3]).tolist(),
+            "angular_velocity_body": self.data.qvel[slot.dof_adr + 3 : slot.dof_adr + 6].tolist(),
+            "thrusters": self.data.act[slot.act_adr : slot.act_adr + n].tolist(),
+            "time_s": self.time,
+        }
+
+    def contacts(self) -> list[Contact]:
+        """Current contacts that involve a robot, with the normal force."""
+        found = []
+        bodies = {slot.body_id: name for name, slot in self._slots.items()}
+        force = np.zeros(6)
+        for k in range(self.data.ncon):
+            contact = self.data.contact[k]
+            b1, b2 = self.model.geom_bodyid[contact.geom1], self.model.geom_bodyid[contact.geom2]
+            for mine, other in ((b1, b2), (b2, b1)):
+                if mine in bodies:
+                    mujoco.mj_contactForce(self.model, self.data, k, force)
+                    other_name = bodies.get(other, "tank" if other == 0 else self.model.body(other).name)
+                    found.append(
+                        Contact(bodies[mine], other_name, tuple(contact.pos.tolist()), float(force[0]))
+                    )
+                    break
+        return found
+
+    def render_stereo(self, robot: str, depth: bool = False, water: bool = True):
+        """The robot's stereo pair as uint8 RGB images ``(H, W, 3)``: ``(left, right)``.
+
+        With ``depth=True`` returns ``(left, right, left_depth, right_depth)``, the
+        planar depth in metres. ``water`` applies the underwater image model.
+        """
+        spec = self._specs[self._check(robot)]
+        if "stereo" not in spec.sensors:
+            raise ValueError(f"{robot} has no stereo camera in this scenario")
+        cam = self.camera
+        images, depths = [], []
+        for side in ("left", "right"):
+            rgb, planar = render_camera(self.model, self.data, f"{robot}/{side}", cam.height, cam.width)
+            if water:
+                rgb = self.water.apply(rgb, self._range(planar), self.rng)
+            images.append(rgb)
+            depths.append(planar)
+        return (*images, *depths) if depth else tuple(images)
+
+    def _range(self, planar: np.ndarray) -> np.ndarray:
+        if self._ray_scale is None:
+            cam = self.camera
+            self._ray_scale = depth_to_range(
+                np.ones_like(planar), cam.fx, cam.fy, cam.width / 2, cam.height / 2
+            )
+        return planar * self._ray_scale
+
+    def intrinsics(self) -> dict:
+        """Calibration of each stereo camera: K matrix, image size, baseline (m), and the
+        extrinsics: camera-to-body rotation and position (x forward, y left, z up)."""
+        cam = self.camera
+        K = [[cam.fx, 0.0, cam.width / 2], [0.0, cam.fy, cam.height / 2], [0.0, 0.0, 1.0]]
+        # optical frame (x right, y down, z forward) in body axes
+        optical_to_body = [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]
+        from envs.world import camera_offsets
+
+        vehicle = self._specs[self.robots[0]].vehicle
+        return {
+            "width": cam.width,
+            "height": cam.height,
+            "K": K,
+            "baseline_m": cam.baseline_m,
+            "optical_to_body": optical_to_body,
+            "positions_body": {side: pos.tolist() for side, pos in camera_offsets(vehicle, cam).items()},
+        }
+
+    def _check(self, robot: str) -> str:
+        if robot not in self._slots:
+            raise KeyError(f"unknown robot {robot!r}; robots: {', '.join(self.robots)}")
+        return robot
+
+
+def rpy_from_matrix(rotation: np.ndarray) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (rad; ZYX about the world axes, z up) from a body-to-world rotation."""
+    R = np.asarray(rotation)
+    pitch = -math.asin(max(-1.0, min(1.0, R[2, 0])))
+    roll = math.atan2(R[2, 1], R[2, 2])
+    yaw = math.atan2(R[1, 0], R[0, 0])
+    return roll, pitch, yaw

@@ -1,0 +1,134 @@
+"""BlueROV2 vehicle parameters, read from ``assets/bluerov2/bluerov2.toml``.
+
+One dataclass per concern: :class:`ThrusterParams` (T200 limits and lag) and
+:class:`VehicleParams` (rigid body, Fossen coefficients, thruster layout, hull).
+Sources of every number: ``assets/bluerov2/README.md``.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+VEHICLE_FILE = Path(__file__).resolve().parent.parent / "assets" / "bluerov2" / "bluerov2.toml"
+FRAMES = ("standard", "heavy")
+
+
+class VehicleConfigError(ValueError):
+    """A vehicle description that cannot be simulated; the message names the value."""
+
+
+@dataclass(frozen=True)
+class ThrusterParams:
+    """Blue Robotics T200 (legacy spec at 16 V): thrust limits and command-to-thrust lag."""
+
+    max_forward_n: float = 50.0
+    max_reverse_n: float = 40.0
+    time_constant_s: float = 0.1
+
+
+@dataclass(frozen=True)
+class SensorMounts:
+    """Where the sensors sit on the vehicle (m, body frame from the CG)."""
+
+    camera_position: tuple[float, float, float] = (0.22, 0.0, 0.0)
+    dvl_position: tuple[float, float, float] = (-0.05, 0.0, -0.12)
+    dvl_beam_angle_deg: float = 22.5
+    dvl_min_range_m: float = 0.05
+    dvl_max_range_m: float = 50.0
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """A BlueROV2 frame: rigid body, Fossen coefficients (magnitudes) and thrusters.
+
+    6-vectors are ordered surge, sway, heave, roll, pitch, yaw along the body axes
+    x forward, y left, z up; the body origin is the centre of gravity.
+    """
+
+    frame: str
+    ardusub_frame: str
+    mass: float
+    inertia: tuple[float, float, float]
+    buoyancy_n: float
+    centre_of_buoyancy: tuple[float, float, float]
+    added_mass: tuple[float, ...]
+    linear_damping: tuple[float, ...]
+    quadratic_damping: tuple[float, ...]
+    hull_size: tuple[float, float, float]
+    thruster_positions: tuple[tuple[float, float, float], ...]
+    thruster_directions: tuple[tuple[float, float, float], ...]
+    thruster: ThrusterParams = field(default_factory=ThrusterParams)
+    sensors: SensorMounts = field(default_factory=SensorMounts)
+    added_mass_coriolis: bool = False
+
+    def __post_init__(self) -> None:
+        _check_positive(f"{self.frame}.mass", [self.mass])
+        _check_positive(f"{self.frame}.inertia", self.inertia)
+        _check_positive(f"{self.frame}.hull_size", self.hull_size)
+        _check_positive(f"{self.frame}.buoyancy_n", [self.buoyancy_n])
+        for name in ("added_mass", "linear_damping", "quadratic_damping"):
+            values = getattr(self, name)
+            if len(values) != 6:
+                raise VehicleConfigError(f"{self.frame}.{name} needs 6 values, got {len(values)}")
+            _check_positive(f"{self.frame}.{name}", values, allow_zero=True)
+        if len(self.thruster_positions) != len(self.thruster_directions):
+            raise VehicleConfigError(f"{self.frame}: thruster positions and directions differ in number")
+        for direction in self.thruster_directions:
+            if not math.isclose(float(np.linalg.norm(direction)), 1.0, abs_tol=1e-3):
+                raise VehicleConfigError(f"{self.frame}: thruster direction {direction} is not a unit vector")
+
+    @property
+    def n_thrusters(self) -> int:
+        """Number of thrusters (6 standard, 8 Heavy)."""
+        return len(self.thruster_positions)
+
+    @property
+    def weight_n(self) -> float:
+        """Weight in water-free terms, m g (N), with g = 9.81 m/s^2."""
+        return self.mass * 9.81
+
+    def rigid_body_mass(self) -> np.ndarray:
+        """Diagonal of M_RB ``(6,)``: mass on the three linear axes, then inertia."""
+        return np.array([self.mass] * 3 + list(self.inertia))
+
+
+def _check_positive(name: str, values, allow_zero: bool = False) -> None:
+    for value in values:
+        ok = isinstance(value, int | float) and math.isfinite(value)
+        ok = ok and (value >= 0.0 if allow_zero else value > 0.0)
+        if not ok:
+            bound = ">= 0" if allow_zero else "> 0"
+            raise VehicleConfigError(f"{name} must be finite and {bound}, got {value!r}")
+
+
+def _tuple(value):
+    return tuple(_tuple(v) for v in value) if isinstance(value, list) else value
+
+
+@cache
+def _document(path: Path) -> dict:
+    return tomllib.loads(path.read_text())
+
+
+def load_vehicle(frame: str = "heavy", path: str | Path | None = None, **overrides) -> VehicleParams:
+    """The parameters of the BlueROV2 ``frame`` ("standard" or "heavy").
+
+    ``overrides`` replace fields, e.g. ``mass=-1`` to check that bad values are refused.
+    """
+    if frame not in FRAMES:
+        raise VehicleConfigError(f"unknown frame {frame!r}; choose one of {', '.join(FRAMES)}")
+    document = _document(Path(path) if path is not None else VEHICLE_FILE)
+    table = {key: _tuple(value) for key, value in document[frame].items()}
+    table.update(overrides)
+    return VehicleParams(
+        frame=frame,
+        thruster=ThrusterParams(**document.get("thruster", {})),
+        sensors=SensorMounts(**{k: _tuple(v) for k, v in document.get("sensors", {}).items()}),
+        **table,
+    )

@@ -1,0 +1,116 @@
+"""Benchmark the simulator: physics steps/s and stereo pairs/s, each as a ratio to bare MuJoCo.
+
+- Physics: the same compiled model stepped with ``mj_step`` (a) bare, with no
+  passive-force callback and no gravity (robots float in place), and (b) with the
+  Fossen hydrodynamics and thrusters on, for 1, 2 and 4 robots. Goal: (b)/(a) >= 0.5.
+- Rendering: 640 x 400 stereo pairs through ``Simulation.render_stereo`` (one
+  render pass per camera, colour and depth read together, water model applied)
+  against a bare ``mujoco.Renderer`` rendering the same two cameras. Goal >= 0.8.
+
+Run: ``make bench`` (or ``python tests/bench/bench_sim.py [--pairs N]``). Prints a
+markdown table; the device line says which GL backend drew the frames.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import mujoco
+
+from envs import hydrodynamics
+from envs.scenario import RobotSpec, Scenario
+from envs.simulation import Simulation
+from envs.vehicle import load_vehicle
+from maptidal.tank import TankModel
+
+
+def scenario(n_robots: int) -> Scenario:
+    """``n_robots`` Heavies in a row across the OSB tank, 2 m from the end wall."""
+    ys = [0.9 - 1.8 * k / max(n_robots - 1, 1) for k in range(n_robots)] if n_robots > 1 else [0.0]
+    robots = tuple(RobotSpec(f"rov{k}", load_vehicle("heavy"), (-2.0, y, 1.0)) for k, y in enumerate(ys))
+    return Scenario("bench", TankModel(), robots)
+
+
+def steps_per_s(model, data, steps: int) -> float:
+    start = time.perf_counter()
+    mujoco.mj_step(model, data, nstep=steps)
+    return steps / (time.perf_counter() - start)
+
+
+def bench_physics(n_robots: int, steps: int = 20000) -> tuple[float, float]:
+    sim = Simulation(scenario(n_robots))
+    for name in sim.robots:
+        sim.data.ctrl[sim.model.actuator(f"{name}/thruster1").id :][:8] = [
+            0.3,
+            -0.2,
+            0.1,
+            0.4,
+            0.2,
+            0.2,
+            0.2,
+            0.2,
+        ]
+    # bare: no callback and no gravity, so the robots float in place as they do with
+    # buoyancy on; otherwise the bare run would pay for floor contacts after 0.5 s
+    mujoco.set_mjcb_passive(None)
+    hydrodynamics._installed = None
+    gravity = sim.model.opt.gravity.copy()
+    sim.model.opt.gravity[:] = 0.0
+    bare = steps_per_s(sim.model, sim.data, steps)
+    sim.model.opt.gravity[:] = gravity
+    sim.reset()
+    hydrodynamics.install_callback()
+    hydro = steps_per_s(sim.model, sim.data, steps)
+    assert not sim.contacts(), "the robots touched something: the comparison would be unfair"
+    return bare, hydro
+
+
+def bench_render(pairs: int) -> tuple[float, float]:
+    sim = Simulation(scenario(1))
+    cam = sim.camera
+    sim.render_stereo("rov0")  # warm up: creates the shared renderer
+    start = time.perf_counter()
+    for _ in range(pairs):
+        sim.render_stereo("rov0")
+    ours = pairs / (time.perf_counter() - start)
+    renderer = mujoco.Renderer(sim.model, cam.height, cam.width)
+    for side in ("left", "right"):
+        renderer.update_scene(sim.data, camera=f"rov0/{side}")
+        renderer.render()
+    start = time.perf_counter()
+    for _ in range(pairs):
+        for side in ("left", "right"):
+            renderer.update_scene(sim.data, camera=f"rov0/{side}")
+            renderer.render()
+    bare = pairs / (time.perf_counter() - start)
+    renderer.close()
+    return bare, ours
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pairs", type=int, default=40, help="stereo pairs per renderer (default 40)")
+    parser.add_argument("--steps", type=int, default=20000, help="physics steps per measurement")
+    args = parser.parse_args()
+    print(
+        f"MUJOCO_GL={os.environ['MUJOCO_GL']}, mujoco {mujoco.__version__}, hydrodynamics "
+        f"{hydrodynamics.install_callback()}"
+    )
+    print("\n| robots | bare mj_step steps/s | with hydrodynamics | ratio |\n|---|---|---|---|")
+    for n in (1, 2, 4):
+        bare, hydro = bench_physics(n, args.steps)
+        print(f"| {n} | {bare:,.0f} | {hydro:,.0f} | {hydro / bare:.2f} |")
+    bare, ours = bench_render(args.pairs)
+    print(
+        "\n| 640x400 stereo pairs/s | bare mujoco.Renderer | render_stereo + water | ratio |"
+        "\n|---|---|---|---|"
+    )
+    print(f"| 1 robot | {bare:.1f} | {ours:.1f} | {ours / bare:.2f} |")
+
+
+if __name__ == "__main__":
+    main()

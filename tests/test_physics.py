@@ -1,0 +1,161 @@
+"""The simulated BlueROV2 against an independent solve_ivp Fossen model and closed-form figures."""
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+from fossen_oracle import simulate
+
+from controllers.mixing import MixerParams, mix
+from envs import hydrodynamics
+from envs.scenario import RobotSpec, Scenario
+from envs.sensors import SensorNoise
+from envs.simulation import Simulation, SimulationError
+from envs.vehicle import load_vehicle
+from maptidal.tank import LadderConfig, TankConfig, TankModel, WindowConfig
+
+QUIET = SensorNoise(0, 0, 0, 0, 0, 0, 0)
+OPEN_WATER = TankModel(
+    TankConfig(
+        name="open_water",
+        water_depth=30.0,
+        end_wall_width=30.0,
+        angled_length=0.0,
+        side_length=30.0,
+        side_evaluated_length=0.5,
+        window=WindowConfig(width=0.0),
+        ladder=LadderConfig(rails=0),
+    )
+)
+
+
+def open_water(frame: str, yaw_deg: float = 0.0, **vehicle) -> Simulation:
+    robot = RobotSpec("rov", load_vehicle(frame, **vehicle), (-15.0, 0.0, 15.0), yaw_deg)
+    return Simulation(Scenario("open", OPEN_WATER, (robot,), noise=QUIET))
+
+
+def run(sim: Simulation, command: dict, duration: float, mode: str = "pilot"):
+    times, velocities, rpys = [], [], []
+    for _ in range(round(duration / sim.scenario.control_period_s)):
+        sim.step({"rov": command}, mode=mode)
+        truth = sim.ground_truth("rov")
+        times.append(sim.time)
+        velocities.append(truth["velocity_body"] + truth["angular_velocity_body"])
+        rpys.append(truth["rpy"])
+    return np.array(times), np.array(velocities), np.array(rpys)
+
+
+def t63(times, speed):
+    final = speed[-1]
+    return float(times[np.argmax(np.abs(speed) >= 0.632 * abs(final))])
+
+
+# (frame, pilot command, axis index, duration): steady speeds and time constants
+CASES = [
+    ("heavy", {"surge": 1.0}, 0, 4.0),
+    ("heavy", {"sway": 1.0}, 1, 4.0),
+    ("heavy", {"heave": -0.6}, 2, 3.0),
+    ("standard", {"surge": 0.6}, 0, 4.0),
+    ("standard", {"sway": -1.0}, 1, 4.0),
+    ("standard", {"heave": 0.7}, 2, 3.0),
+]
+
+
+@pytest.mark.parametrize(("frame", "command", "axis", "duration"), CASES)
+def test_step_response_matches_solve_ivp(frame, command, axis, duration):
+    sim = open_water(frame)
+    times, velocities, _ = run(sim, command, duration)
+    vehicle = sim.scenario.robots[0].vehicle
+    thrusters = mix(command, MixerParams(vehicle.ardusub_frame))
+    ref_t, _, ref_nu = simulate(vehicle, thrusters, duration)
+    ours, ref = velocities[:, axis], np.interp(times, ref_t, ref_nu[:, axis])
+    assert abs(ours[-1] - ref[-1]) <= 0.05 * abs(ref[-1])
+    assert abs(t63(times, ours) - t63(times, ref)) <= 0.05 * t63(times, ref) + 0.02  # one control period
+    assert np.max(np.abs(ours - ref)) <= 0.05 * abs(ref[-1])
+
+
+def test_top_speed_is_the_closed_form_balance_of_thrust_and_drag():
+    """Full forward: 2 x 40 N reverse + 2 x 50 N forward at 45 deg = 127.3 N against 13.7 u + 141 u^2."""
+    sim = open_water("heavy")
+    _, velocities, _ = run(sim, {"surge": 1.0}, 5.0)
+    thrust = (2 * 40.0 + 2 * 50.0) * math.cos(math.radians(45))
+    expected = (-13.7 + math.sqrt(13.7**2 + 4 * 141.0 * thrust)) / (2 * 141.0)
+    assert velocities[-1, 0] == pytest.approx(expected, rel=0.01)
+    assert 0.85 < expected < 0.95  # about 0.9 m/s, below Blue Robotics' ~1.5 m/s (see README)
+
+
+@pytest.mark.parametrize("frame", ["heavy", "standard"])
+def test_idle_vehicle_rises_slowly_at_the_buoyancy_drag_balance(frame):
+    sim = open_water(frame)
+    _, velocities, _ = run(sim, {}, 6.0)
+    vehicle = sim.scenario.robots[0].vehicle
+    net = vehicle.buoyancy_n - vehicle.mass * 9.81
+    zl, zq = vehicle.linear_damping[2], vehicle.quadratic_damping[2]
+    expected = (-zl + math.sqrt(zl**2 + 4 * zq * net)) / (2 * zq)
+    assert 0 < expected < 0.2
+    assert velocities[-1, 2] == pytest.approx(expected, rel=0.05)
+
+
+@pytest.mark.parametrize("frame", ["heavy", "standard"])
+def test_tilted_vehicle_levels_itself(frame):
+    sim = open_water(frame)
+    sim.data.qpos[3:7] = [math.cos(0.2), math.sin(0.2), 0.0, 0.0]  # 0.4 rad roll
+    mujoco.mj_forward(sim.model, sim.data)
+    _, _, rpys = run(sim, {}, 30.0)
+    assert np.max(np.abs(rpys[-100:, 0])) < 0.5 * 0.4
+    assert abs(np.mean(rpys[-100:, 0])) < 0.02
+
+
+@pytest.mark.parametrize("frame", ["heavy", "standard"])
+def test_pure_sway_does_not_yaw_and_pure_heave_does_not_pitch_or_roll(frame):
+    sim = open_water(frame, yaw_deg=30.0)
+    _, velocities, rpys = run(sim, {"sway": 1.0}, 3.0)
+    assert np.max(np.abs(velocities[:, 5])) < 1e-6
+    assert np.max(np.abs(rpys[:, 2] - math.radians(30))) < 1e-6
+    sim.reset()
+    _, velocities, rpys = run(sim, {"heave": -1.0}, 3.0)
+    assert np.max(np.abs(rpys[:, :2])) < 1e-6 and np.max(np.abs(velocities[:, 3:5])) < 1e-6
+
+
+def test_native_and_numpy_callbacks_give_the_same_forces():
+    sim = open_water("heavy", added_mass_coriolis=True)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        sim.data.qvel[:] = rng.normal(0, 0.5, 6)
+        quat = rng.normal(size=4)
+        sim.data.qpos[3:7] = quat / np.linalg.norm(quat)
+        sim.data.act[:] = rng.uniform(-1, 1, 8)
+        forces = {}
+        for backend in ("numpy", "native"):
+            assert hydrodynamics.install_callback(prefer_native=backend == "native") == backend
+            mujoco.mj_forward(sim.model, sim.data)
+            forces[backend] = sim.data.qfrc_passive.copy()
+        assert np.abs(forces["native"]).max() > 1.0
+        np.testing.assert_allclose(forces["native"], forces["numpy"], rtol=1e-9, atol=1e-9)
+
+
+def test_hydrodynamics_off_leaves_a_bare_rigid_body():
+    sim = open_water("heavy")
+    sim.set_hydrodynamics(False)
+    run(sim, {"surge": 1.0}, 1.0)
+    truth = sim.ground_truth("rov")
+    assert truth["velocity_body"][2] == pytest.approx(-9.81, rel=0.01)  # free fall, no thrust
+    assert abs(truth["velocity_body"][0]) < 1e-9
+
+
+def test_nan_state_raises_a_clear_error():
+    sim = open_water("heavy")
+    sim.data.qvel[0] = np.nan
+    with pytest.raises(SimulationError, match="NaN"):
+        sim.step({"rov": {}})
+
+
+def test_collision_with_the_wall_is_reported():
+    sim = Simulation()
+    sim.reset(seed=0)
+    for _ in range(150):
+        sim.step({"rov0": {"surge": 1.0, "heave": 0.1}})
+    contacts = sim.contacts()
+    assert contacts and all(c.robot == "rov0" and c.other == "tank" for c in contacts)
+    assert max(c.normal_force_n for c in contacts) > 1.0
