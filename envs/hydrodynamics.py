@@ -306,6 +306,13 @@ def install_callback(prefer_native: bool = True) -> str:
     return "numpy"
 
 
+def uninstall_callback() -> None:
+    """Remove the passive-force callback (for baselines: bare MuJoCo with no hydrodynamics)."""
+    global _installed
+    mujoco.set_mjcb_passive(None)
+    _installed = None
+
+
 def installed_backend() -> str | None:
     """Which callback is installed: "native", "numpy" or None."""
     return _installed

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from envs.world import ROBOT_SENSORS
+
 WATER_DENSITY = 1000.0  # kg/m^3, fresh water tank
 ATMOSPHERE_PA = 101325.0
 SENSORS = ("imu", "depth", "dvl", "compass", "stereo")
@@ -64,17 +66,7 @@ class RobotSensors:
         self.water_depth = water_depth
         self.body_id = int(model.body(f"{prefix}base").id)
         self._slices = {}
-        for name in (
-            "accelerometer",
-            "gyro",
-            "magnetometer",
-            "velocimeter",
-            "depth_pos",
-            "beam0",
-            "beam1",
-            "beam2",
-            "beam3",
-        ):
+        for name, _, _ in ROBOT_SENSORS:
             sensor = model.sensor(f"{prefix}{name}")
             self._slices[name] = slice(sensor.adr[0], sensor.adr[0] + sensor.dim[0])
         self.accel_bias = np.zeros(3)

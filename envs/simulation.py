@@ -33,7 +33,7 @@ from envs.rendering import render_camera
 from envs.scenario import Scenario, load_scenario
 from envs.sensors import RobotSensors
 from envs.water import WaterModel, depth_to_range
-from envs.world import RobotPlacement, compose
+from envs.world import RobotPlacement, camera_offsets, compose
 from maptidal.keyframes import StereoCameraParams
 
 
@@ -75,10 +75,12 @@ class Simulation:
         self._slots: dict[str, hydrodynamics.RobotSlot] = {}
         self._sensors: dict[str, RobotSensors] = {}
         self._mixers: dict[str, MixerParams] = {}
+        self._ctrl_adr: dict[str, int] = {}
         for robot in self.scenario.robots:
             body = self.model.body(f"{robot.name}/base")
             joint = self.model.joint(f"{robot.name}/root")
             actuator = self.model.actuator(f"{robot.name}/thruster1")
+            self._ctrl_adr[robot.name] = int(actuator.id)
             self._slots[robot.name] = hydrodynamics.RobotSlot(
                 int(body.id), int(joint.dofadr[0]), int(self.model.actuator_actadr[actuator.id])
             )
@@ -146,9 +148,9 @@ class Simulation:
         for robot, command in (commands or {}).items():
             if robot not in self._slots:
                 raise KeyError(f"unknown robot {robot!r}; robots: {', '.join(self.robots)}")
-            actuator = self.model.actuator(f"{robot}/thruster1").id
             thrusters = self.thruster_commands(robot, command, mode)
-            self.data.ctrl[actuator : actuator + len(thrusters)] = thrusters
+            first = self._ctrl_adr[robot]
+            self.data.ctrl[first : first + len(thrusters)] = thrusters
         bad_before = self._instability_warnings()
         start = time.perf_counter()
         mujoco.mj_step(self.model, self.data, nstep=self.scenario.substeps)
@@ -248,8 +250,6 @@ class Simulation:
         K = [[cam.fx, 0.0, cam.width / 2], [0.0, cam.fy, cam.height / 2], [0.0, 0.0, 1.0]]
         # optical frame (x right, y down, z forward) in body axes
         optical_to_body = [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]
-        from envs.world import camera_offsets
-
         vehicle = self._specs[self.robots[0]].vehicle
         return {
             "width": cam.width,

@@ -15,22 +15,22 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from envs.hydrodynamics import userdata_size
 from envs.textures import TextureParams, concrete_texture, floor_texture, fouling_texture
 from envs.vehicle import VehicleParams
 from maptidal.keyframes import StereoCameraParams
 from maptidal.tank import TankModel
 
 WALL_THICKNESS = 0.1  # m, collision boxes behind each surface
-SENSOR_NAMES = (
-    "accelerometer",
-    "gyro",
-    "magnetometer",
-    "velocimeter",
-    "depth_pos",
-    "beam0",
-    "beam1",
-    "beam2",
-    "beam3",
+_S = mujoco.mjtSensor
+# Every robot's MuJoCo sensors: (name, type, site); envs.sensors reads them by these names.
+ROBOT_SENSORS: tuple[tuple[str, mujoco.mjtSensor, str], ...] = (
+    ("accelerometer", _S.mjSENS_ACCELEROMETER, "imu"),
+    ("gyro", _S.mjSENS_GYRO, "imu"),
+    ("magnetometer", _S.mjSENS_MAGNETOMETER, "imu"),
+    ("velocimeter", _S.mjSENS_VELOCIMETER, "dvl"),
+    ("depth_pos", _S.mjSENS_FRAMEPOS, "depth"),
+    *((f"beam{k}", _S.mjSENS_RANGEFINDER, f"beam{k}") for k in range(4)),
 )
 
 
@@ -312,18 +312,10 @@ def build_robot_spec(vehicle: VehicleParams, camera: StereoCameraParams | None =
         base.add_site(
             name=f"beam{k}", pos=list(mounts.dvl_position), quat=_quat_from_axes(x, np.cross(z, x), z)
         )
-    sensor_types = mujoco.mjtSensor
-    for name, kind, site in (
-        ("accelerometer", sensor_types.mjSENS_ACCELEROMETER, "imu"),
-        ("gyro", sensor_types.mjSENS_GYRO, "imu"),
-        ("magnetometer", sensor_types.mjSENS_MAGNETOMETER, "imu"),
-        ("velocimeter", sensor_types.mjSENS_VELOCIMETER, "dvl"),
-        ("depth_pos", sensor_types.mjSENS_FRAMEPOS, "depth"),
-        *((f"beam{k}", sensor_types.mjSENS_RANGEFINDER, f"beam{k}") for k in range(4)),
-    ):
+    for name, kind, site in ROBOT_SENSORS:
         sensor = spec.add_sensor(name=name, type=kind, objname=site)
         sensor.objtype = mujoco.mjtObj.mjOBJ_SITE
-        if kind == sensor_types.mjSENS_RANGEFINDER:
+        if kind == _S.mjSENS_RANGEFINDER:
             sensor.intprm[0] = 1 << int(mujoco.mjtRayDataField.mjRAYDATA_DIST)  # distance only
     return spec
 
@@ -341,8 +333,6 @@ def compose(
     ``magnetic_field`` (Gauss, world frame) points north along +x with a steep
     inclination, roughly as in Trondheim (about 73 deg down).
     """
-    from envs.hydrodynamics import userdata_size
-
     spec = build_tank_spec(tank, textures)
     spec.option.timestep = timestep
     spec.option.magnetic = list(magnetic_field)

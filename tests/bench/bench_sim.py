@@ -56,8 +56,7 @@ def bench_physics(n_robots: int, steps: int = 20000) -> tuple[float, float]:
         ]
     # bare: no callback and no gravity, so the robots float in place as they do with
     # buoyancy on; otherwise the bare run would pay for floor contacts after 0.5 s
-    mujoco.set_mjcb_passive(None)
-    hydrodynamics._installed = None
+    hydrodynamics.uninstall_callback()
     gravity = sim.model.opt.gravity.copy()
     sim.model.opt.gravity[:] = 0.0
     bare = steps_per_s(sim.model, sim.data, steps)
