@@ -33,6 +33,7 @@ bench: setup
 	$(BIN)/python tests/bench/bench_discovery.py
 	$(BIN)/python tests/bench/bench_coverage.py
 	$(BIN)/python tests/bench/bench_sim.py
+	$(BIN)/python tests/bench/bench_allocation.py
 
 lint: setup
 	$(BIN)/ruff check maptidal envs controllers tests

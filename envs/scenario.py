@@ -18,6 +18,7 @@ import numpy as np
 from envs.sensors import SENSORS, SensorNoise
 from envs.vehicle import FRAMES, VehicleConfigError, VehicleParams, load_vehicle
 from envs.water import WaterParams
+from maptidal.checks import check_keys, finite_vector, require
 from maptidal.tank import DEFAULT_TANK_CONFIG, TankConfigError, TankModel, load_tank_config
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
@@ -61,20 +62,15 @@ class Scenario:
 
 
 def _require(condition: bool, message: str) -> None:
-    if not condition:
-        raise ScenarioError(message)
+    require(condition, message, ScenarioError)
 
 
 def _check_keys(table: dict, allowed: set[str], where: str) -> None:
-    for key in table:
-        _require(key in allowed, f"unknown key {key!r} in {where}; allowed: {', '.join(sorted(allowed))}")
+    check_keys(table, allowed, where, ScenarioError)
 
 
 def _vector(value, where: str, size: int = 3) -> tuple[float, ...]:
-    ok = isinstance(value, list | tuple) and len(value) == size
-    ok = ok and all(isinstance(v, int | float) and math.isfinite(v) for v in value)
-    _require(ok, f"{where} must be {size} finite numbers, got {value!r}")
-    return tuple(float(v) for v in value)
+    return finite_vector(value, where, size, ScenarioError)
 
 
 def inside_tank(tank: TankModel, point: np.ndarray, margin: float = 0.0) -> bool:

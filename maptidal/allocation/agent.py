@@ -1,0 +1,539 @@
+"""A robot's task manager: CBBA state, bundle building, and its side of the message exchange.
+
+Each robot keeps (paper Sec. III.A): its known-task inventory; the CBBA state y (winning bids), z
+(winners), clocks (s, the time it last heard of each robot: real milliseconds, not iteration counts),
+bundle and path; what each neighbour is known to hold (from acknowledgements and from what it sent);
+and when it last heard from each robot. It acts only on what it has received.
+
+Deltas: a robot sends an entry only to neighbours not known to hold its current value. Knowledge comes
+from acknowledgements (a neighbour acks a message sequence number, and the robot remembers what that
+message carried) and from the neighbour's own messages: an entry it sent that the receiver agrees with
+after conflict resolution is held by both. When the two still disagree after resolution, the receiver
+marks the entry as not held, so its view goes back. That replaces CBBA's every-round full broadcast.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from maptidal.allocation.consensus import RESET, UPDATE, resolve
+from maptidal.allocation.messages import (
+    DONE,
+    NEVER,
+    NO_WINNER,
+    Message,
+    MessageError,
+    decode,
+    encode,
+    size_of,
+)
+from maptidal.allocation.scoring import (
+    AuctionParams,
+    PathGeometry,
+    RobotProfile,
+    best_candidate,
+    task_positions,
+    warped_bids,
+)
+from maptidal.allocation.tasks import Task, task_key
+
+MAX_ROBOTS = 250
+_SENT_MEMORY = 256  # sequence numbers whose contents are remembered for late acknowledgements
+
+
+@dataclass(frozen=True)
+class AgentParams:
+    """Timing of one robot's task manager.
+
+    failure_timeout_s: a robot not heard of (directly or relayed) for this long is declared failed and
+    its tasks are released; heartbeat_s: a robot with nothing to say still transmits this often so that
+    the others know it is alive."""
+
+    failure_timeout_s: float = 120.0
+    heartbeat_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        if not (self.failure_timeout_s > 0 and self.heartbeat_s > 0):
+            raise ValueError("failure_timeout_s and heartbeat_s must be > 0")
+        if self.failure_timeout_s <= self.heartbeat_s:
+            raise ValueError("failure_timeout_s must exceed heartbeat_s, or live robots are declared failed")
+
+
+@dataclass
+class AgentStats:
+    """Counters of one robot's traffic."""
+
+    messages_sent: int = 0
+    bytes_sent: int = 0
+    messages_accepted: int = 0
+    rejected: Counter = field(default_factory=Counter)
+    unknown_task_entries: int = 0
+
+
+# A broadcast reaches every robot as the same bytes; decoding them once per simulation is a speed-up
+# of the simulator, not of a robot (the Message is never modified by its readers).
+_decode = functools.lru_cache(maxsize=256)(decode)
+
+
+def _ms(time_s: float) -> int:
+    return round(time_s * 1000.0)
+
+
+class CBBAAgent:
+    """One robot's CBBA task manager (see the module docstring)."""
+
+    def __init__(
+        self,
+        robot: RobotProfile,
+        auction: AuctionParams | None = None,
+        params: AgentParams | None = None,
+    ) -> None:
+        self.robot = robot
+        self.index = robot.index
+        self.auction = auction or AuctionParams()
+        self.params = params or AgentParams()
+        self.stats = AgentStats()
+        self.tasks: list[Task] = []
+        self._slot_of: dict[int, int] = {}
+        self._sorted_keys = np.zeros(0, dtype=np.int64)
+        self._sort_order = np.zeros(0, dtype=np.int64)
+        self.y = np.zeros(0)
+        self.z = np.zeros(0, dtype=np.int64)
+        self._version = np.zeros(0, dtype=np.int64)
+        self._tick = 0
+        self.bundle: list[int] = []
+        self.bundle_bids: list[float] = []
+        self.path: list[int] = []
+        self.clocks = np.full(MAX_ROBOTS, NEVER, dtype=np.int64)
+        self.failed: set[int] = set()
+        self._peer_entry: dict[int, np.ndarray] = {}  # version of my entry each peer holds (-1 = not)
+        self._peer_task: dict[int, np.ndarray] = {}  # whether each peer knows each task record
+        self._seq = 0
+        self._sent: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._last_seq_from: dict[int, int] = {}
+        self._ack_owed: dict[int, int] = {}
+        self._last_sent_ms: int | None = None
+        self._geometry: PathGeometry | None = None
+        self._feasible = np.zeros(0, dtype=bool)
+        self._task_counter = 0
+        self.last_change_s = 0.0
+        self.alive = True
+        self.last_message_had_content = False
+        self._bids_lowered = False  # some bid fell or was withdrawn since the last bundle check
+
+    # ------------------------------------------------------------------ tasks
+    @property
+    def n_tasks(self) -> int:
+        """Number of tasks this robot knows."""
+        return len(self.tasks)
+
+    @property
+    def keys(self) -> np.ndarray:
+        """Keys of the known tasks, in local slot order."""
+        return self._sorted_keys[np.argsort(self._sort_order)]
+
+    def add_tasks(
+        self, tasks: list[Task], from_robot: int | None = None, known_to: tuple[int, ...] = ()
+    ) -> int:
+        """Learn tasks (duplicates ignored); returns how many were new.
+
+        from_robot: the neighbour the records came from (it knows them); known_to: robots known to hold
+        the records already (for a mission plan every robot was given)."""
+        fresh = [t for t in tasks if t.key not in self._slot_of]
+        fresh = list({t.key: t for t in fresh}.values())
+        if from_robot is not None:
+            for t in tasks:
+                if t.key in self._slot_of:
+                    self._peer_task_array(from_robot)[self._slot_of[t.key]] = True
+        if not fresh:
+            return 0
+        start = len(self.tasks)
+        for offset, task in enumerate(fresh):
+            self._slot_of[task.key] = start + offset
+        self.tasks.extend(fresh)
+        n_new = len(fresh)
+        self.y = np.concatenate([self.y, np.zeros(n_new)])
+        self.z = np.concatenate([self.z, np.full(n_new, NO_WINNER, dtype=np.int64)])
+        self._version = np.concatenate([self._version, np.zeros(n_new, dtype=np.int64)])
+        self._feasible = np.concatenate(
+            [self._feasible, np.array([self.robot.can_do(t.requires) for t in fresh], dtype=bool)]
+        )
+        for peer in list(self._peer_entry):
+            self._peer_entry[peer] = np.concatenate([self._peer_entry[peer], np.zeros(n_new, dtype=np.int64)])
+            self._peer_task[peer] = np.concatenate([self._peer_task[peer], np.zeros(n_new, dtype=bool)])
+        for peer in (*known_to, *(() if from_robot is None else (from_robot,))):
+            if peer != self.index:
+                self._peer_task_array(peer)[start:] = True
+        keys = np.array([t.key for t in self.tasks], dtype=np.int64)
+        self._sort_order = np.argsort(keys, kind="stable")
+        self._sorted_keys = keys[self._sort_order]
+        self._geometry = None
+        return n_new
+
+    def discover_task(
+        self, position, direction=(1.0, 0.0, 0.0), requires: int | tuple[str, ...] = (), now_s: float = 0.0
+    ) -> Task:
+        """Mint a task this robot discovered (key = this robot's index and its own counter) and learn it."""
+        task = Task.create(task_key(self.index, self._task_counter), position, direction, requires)
+        self._task_counter += 1
+        self.add_tasks([task])
+        self.last_change_s = max(self.last_change_s, now_s)
+        return task
+
+    def slots_of(self, keys: np.ndarray) -> np.ndarray:
+        """Local slots of task keys; -1 for keys this robot does not know."""
+        keys = np.asarray(keys, dtype=np.int64)
+        if not len(self._sorted_keys):
+            return np.full(len(keys), -1, dtype=np.int64)
+        at = np.searchsorted(self._sorted_keys, keys).clip(0, len(self._sorted_keys) - 1)
+        found = self._sorted_keys[at] == keys
+        return np.where(found, self._sort_order[at], -1)
+
+    def mark_done(self, key: int, now_s: float) -> bool:
+        """Record a completed task: it leaves the auction everywhere once the news spreads."""
+        slot = self._slot_of.get(key)
+        if slot is None or self.z[slot] == DONE:
+            return False
+        self._set(slot, DONE, 0.0)
+        self._drop_from_bundle({slot})
+        self.last_change_s = now_s
+        return True
+
+    def set_position(self, position) -> None:
+        """Move the start of the path (the robot's current position) for future bids."""
+        self.robot.position = np.asarray(position, dtype=float)
+        self._geometry = None
+
+    # ------------------------------------------------------------------ state changes
+    def _peer_task_array(self, peer: int) -> np.ndarray:
+        if peer not in self._peer_task:
+            self._peer_entry[peer] = np.zeros(self.n_tasks, dtype=np.int64)
+            self._peer_task[peer] = np.zeros(self.n_tasks, dtype=bool)
+        return self._peer_task[peer]
+
+    def _set(self, slots, winner, bid) -> None:
+        self._tick += 1
+        self.z[slots] = winner
+        self.y[slots] = bid
+        self._version[slots] = self._tick
+
+    def _drop_from_bundle(self, slots: set[int]) -> None:
+        keep = [n for n, j in enumerate(self.bundle) if j not in slots]
+        self.bundle = [self.bundle[n] for n in keep]
+        self.bundle_bids = [self.bundle_bids[n] for n in keep]
+        self.path = [j for j in self.path if j not in slots]
+
+    def _release_outbid(self) -> None:
+        """Drop the first bundle entry this robot no longer wins and every entry after it (CBBA)."""
+        lost = next((n for n, j in enumerate(self.bundle) if self.z[j] != self.index), None)
+        if lost is None:
+            return
+        later = [j for j in self.bundle[lost + 1 :] if self.z[j] == self.index]
+        if later:
+            self._set(np.array(later), NO_WINNER, 0.0)
+        self._drop_from_bundle(set(self.bundle[lost:]))
+
+    def live_peers(self) -> list[int]:
+        """Robots heard of and not declared failed."""
+        heard = np.flatnonzero(self.clocks != NEVER)
+        return [int(p) for p in heard if p != self.index and p not in self.failed]
+
+    # ------------------------------------------------------------------ bundle phase
+    def _bids(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self._geometry is None:
+            self._geometry = PathGeometry(self.robot.position, task_positions(self.tasks))
+        return warped_bids(
+            self._geometry, self.path, self.bundle_bids, self.robot.cost_per_m, self.auction.task_value
+        )
+
+    def _biddable(self, raw: np.ndarray, bid: np.ndarray, in_bundle: np.ndarray | None = None) -> np.ndarray:
+        if in_bundle is None:
+            in_bundle = np.zeros(self.n_tasks, dtype=bool)
+            in_bundle[self.bundle] = True
+        holder = np.where(self.z >= 0, self.z, np.iinfo(np.int64).max)
+        beats = (bid > self.y) | ((bid == self.y) & (self.index < holder))
+        return self._feasible & ~in_bundle & (self.z != DONE) & (raw > 0) & (bid > 0) & beats
+
+    def _recheck_bundle(self, keys: np.ndarray) -> bool:
+        """Replay the bundle's construction against the current bids; release from the first entry that
+        is no longer this robot's best choice. Returns True when it released something.
+
+        A robot blocked from a task by a bid that is later withdrawn (the holder lost an earlier entry)
+        has meanwhile bid on worse tasks, and under bid warping those lower its cap for good. Releasing
+        them when the better task comes free keeps every bundle what a greedy construction against the
+        current bids would build, which is what makes the converged assignment the sequential greedy one.
+        """
+        if not self.bundle:
+            return False
+        own = np.zeros(self.n_tasks, dtype=bool)
+        own[self.bundle] = True
+        path: list[int] = []
+        bids: list[float] = []
+        in_prefix = np.zeros(self.n_tasks, dtype=bool)
+        for n, held in enumerate(self.bundle):
+            raw, bid, position = warped_bids(
+                self._geometry, path, bids, self.robot.cost_per_m, self.auction.task_value
+            )
+            candidates = np.flatnonzero(((self._biddable(raw, bid, in_prefix)) | own) & ~in_prefix)
+            if best_candidate(candidates, keys, raw, bid) != held:
+                released = self.bundle[n:]
+                self._set(np.array(released), NO_WINNER, 0.0)
+                self._drop_from_bundle(set(released))
+                return True
+            path.insert(int(position[held]), held)
+            bids.append(float(bid[held]))
+            in_prefix[held] = True
+        return False
+
+    def build_bundle(self, now_s: float = 0.0) -> bool:
+        """CBBA's bundle phase: add the best outbidding task until none is left or the bundle is full.
+
+        Returns True when the bundle changed."""
+        if not self.alive or not self.n_tasks:
+            return False
+        limit = self.auction.bundle_limit or math.inf
+        keys = np.array([t.key for t in self.tasks], dtype=np.int64)
+        if self._geometry is None:
+            self._geometry = PathGeometry(self.robot.position, task_positions(self.tasks))
+        changed = False
+        if self._bids_lowered:
+            changed = self._recheck_bundle(keys)
+            self._bids_lowered = False
+        while len(self.bundle) < limit:
+            raw, bid, position = self._bids()
+            candidates = np.flatnonzero(self._biddable(raw, bid))
+            if not len(candidates):
+                break
+            best = best_candidate(candidates, keys, raw, bid)
+            self.path.insert(int(position[best]), int(best))
+            self.bundle.append(int(best))
+            self.bundle_bids.append(float(bid[best]))
+            self._set(best, self.index, float(bid[best]))
+            changed = True
+        if changed:
+            self.last_change_s = now_s
+        return changed
+
+    def would_bid(self) -> bool:
+        """True when a bundle phase now would add a task (a dry run for convergence checks)."""
+        if not self.alive or not self.n_tasks:
+            return False
+        if self.auction.bundle_limit and len(self.bundle) >= self.auction.bundle_limit:
+            return False
+        raw, bid, _ = self._bids()
+        return bool(self._biddable(raw, bid).any())
+
+    # ------------------------------------------------------------------ receiving
+    def check_failures(self, now_s: float) -> list[int]:
+        """Declare robots not heard of for failure_timeout_s failed and release their tasks."""
+        now = _ms(now_s)
+        newly = [
+            p for p in self.live_peers() if now - self.clocks[p] > self.params.failure_timeout_s * 1000.0
+        ]
+        for peer in newly:
+            self.failed.add(peer)
+            held = np.flatnonzero(self.z == peer)
+            if len(held):
+                self._set(held, NO_WINNER, 0.0)
+                self.last_change_s = now_s
+                self._bids_lowered = True
+        return newly
+
+    def receive(self, data: bytes, now_s: float) -> bool:
+        """Process one received message; returns False (and counts why) when it is rejected."""
+        try:
+            message = _decode(data)
+        except MessageError as error:
+            self.stats.rejected[error.reason] += 1
+            return False
+        sender = message.sender
+        if (
+            sender == self.index
+            or sender >= MAX_ROBOTS
+            or len(message.clocks_ms) > MAX_ROBOTS
+            or (message.winners >= MAX_ROBOTS).any()
+        ):
+            self.stats.rejected["malformed"] += 1
+            return False
+        if message.seq <= self._last_seq_from.get(sender, 0):
+            self.stats.rejected["replayed"] += 1  # a replay, or older than one already processed
+            return False
+        self._last_seq_from[sender] = message.seq
+        self.stats.messages_accepted += 1
+        if message.has_content:
+            self._ack_owed[sender] = message.seq
+        self._peer_task_array(sender)
+        self._apply_acks(sender, message.acks)
+        if message.tasks:
+            self.add_tasks(message.tasks, from_robot=sender)
+        clocks_sender = np.full(MAX_ROBOTS, NEVER, dtype=np.int64)
+        clocks_sender[: len(message.clocks_ms)] = message.clocks_ms
+        # a robot heard of more recently than when this robot gave up on it is alive after all
+        self.failed = {p for p in self.failed if p != sender and clocks_sender[p] <= self.clocks[p]}
+        if len(message.keys):
+            self._resolve(message, clocks_sender, now_s)
+        now = _ms(now_s)
+        self.clocks = np.maximum(self.clocks, clocks_sender)
+        self.clocks[sender] = max(now, self.clocks[sender])
+        self.clocks[self.index] = max(self.clocks[self.index], now)
+        return True
+
+    def _apply_acks(self, sender: int, acks: list[tuple[int, int]]) -> None:
+        for robot, seq in acks:
+            if robot != self.index or seq not in self._sent:
+                continue
+            slots, versions, task_slots = self._sent[seq]
+            held = self._peer_entry[sender]
+            held[slots] = np.maximum(held[slots], versions)
+            self._peer_task[sender][task_slots] = True
+
+    def _resolve(self, message: Message, clocks_sender: np.ndarray, now_s: float) -> None:
+        sender = message.sender
+        slots = self.slots_of(message.keys)
+        known = slots >= 0
+        z_k, y_k = message.winners, message.bids
+        if not known.all():
+            self.stats.unknown_task_entries += int((~known).sum())
+            slots, z_k, y_k = slots[known], z_k[known], y_k[known]
+        self._peer_task[sender][slots] = True
+        if (z_k == DONE).any():
+            news = (z_k == DONE) & (self.z[slots] != DONE)
+            if news.any():
+                self._set(slots[news], DONE, 0.0)
+                self._drop_from_bundle(set(slots[news].tolist()))
+                self.last_change_s = now_s
+            live = (z_k != DONE) & (self.z[slots] != DONE)
+            slots, z_k, y_k = slots[live], z_k[live], y_k[live]
+        if self.failed:
+            gone = np.isin(z_k, list(self.failed))
+            z_k, y_k = np.where(gone, NO_WINNER, z_k), np.where(gone, 0.0, y_k)
+        held = self._peer_entry[sender]
+        # identical entries resolve to no change in every row of the table; only differences need it
+        differ = (self.z[slots] != z_k) | (self.y[slots] != y_k)
+        held[slots] = np.where(differ, held[slots], self._version[slots])
+        if not differ.any():
+            return
+        slots, z_k, y_k = slots[differ], z_k[differ], y_k[differ]
+        action = resolve(
+            self.index, sender, self.z[slots], self.y[slots], z_k, y_k, self.clocks, clocks_sender
+        )
+        update = action == UPDATE
+        reset = (action == RESET) & (self.z[slots] != NO_WINNER)
+        if update.any():
+            self._set(slots[update], z_k[update], y_k[update])
+        if reset.any():
+            self._set(slots[reset], NO_WINNER, 0.0)
+        if update.any() or reset.any():
+            self.last_change_s = now_s
+            self._bids_lowered = True
+            self._release_outbid()
+        # what the sender holds: my value where we agree now; otherwise it must hear my view
+        agree = (self.z[slots] == z_k) & (self.y[slots] == y_k)
+        held[slots] = np.where(agree, self._version[slots], -1)
+
+    # ------------------------------------------------------------------ sending
+    def _pending(self, peers: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        entries = np.zeros(self.n_tasks, dtype=bool)
+        records = np.zeros(self.n_tasks, dtype=bool)
+        for peer in peers:
+            self._peer_task_array(peer)
+            entries |= self._version > self._peer_entry[peer]
+            records |= ~self._peer_task[peer]
+        return entries, records
+
+    def has_pending(self, peers: list[int] | None = None) -> bool:
+        """True when a peer lacks an entry, a task record or an ack from this robot.
+
+        peers: whom to ask about (default: the live peers). A simulator that knows who is really
+        reachable passes those, including robots this one has wrongly declared failed."""
+        peers = self.live_peers() if peers is None else [p for p in peers if p != self.index]
+        entries, records = self._pending(peers)
+        return bool(entries.any() or records.any() or any(p in self._ack_owed for p in peers))
+
+    def make_message(self, now_s: float, capacity_bytes: int | None = None) -> bytes | None:
+        """The message for this robot's transmit slot, or None when it has nothing to say.
+
+        It carries the acks owed, then task records and bid entries some live peer lacks (newest
+        entries first, each with its task record when needed) as far as capacity_bytes allows."""
+        if not self.alive:
+            return None
+        now = _ms(now_s)
+        self.clocks[self.index] = max(self.clocks[self.index], now)
+        peers = self.live_peers()
+        entries, records = self._pending(peers)
+        heartbeat_due = (
+            self._last_sent_ms is None or now - self._last_sent_ms >= self.params.heartbeat_s * 1000
+        )
+        if not (entries.any() or records.any() or self._ack_owed or heartbeat_due):
+            return None
+        n_clocks = int(np.flatnonzero(self.clocks != NEVER).max()) + 1
+        acks = sorted(self._ack_owed.items())
+        budget = math.inf if capacity_bytes is None else capacity_bytes
+        while acks and size_of(n_clocks, len(acks), 0, 0) > budget:
+            acks.pop()  # the rest stay owed for the next slot
+        entry_slots = np.flatnonzero(entries)
+        entry_slots = entry_slots[np.argsort(-self._version[entry_slots], kind="stable")]
+        record_slots = np.flatnonzero(records)
+        if size_of(n_clocks, len(acks), len(record_slots), len(entry_slots)) > budget:
+            record_slots, entry_slots = self._fit(budget, n_clocks, len(acks), records, entry_slots)
+        self._seq += 1
+        message = Message(
+            sender=self.index,
+            seq=self._seq,
+            clocks_ms=self.clocks[:n_clocks].copy(),
+            acks=acks,
+            tasks=[self.tasks[s] for s in record_slots],
+            keys=np.array([self.tasks[s].key for s in entry_slots], dtype=np.int64),
+            winners=self.z[entry_slots],
+            bids=self.y[entry_slots],
+        )
+        data = encode(message)
+        self._sent[self._seq] = (entry_slots, self._version[entry_slots].copy(), record_slots)
+        self._sent.pop(self._seq - _SENT_MEMORY, None)
+        for robot, _ in acks:
+            del self._ack_owed[robot]
+        self._last_sent_ms = now
+        self.last_message_had_content = bool(len(entry_slots) or len(record_slots))
+        self.stats.messages_sent += 1
+        self.stats.bytes_sent += len(data)
+        return data
+
+    def _fit(self, budget: float, n_clocks: int, n_acks: int, records: np.ndarray, entry_slots: np.ndarray):
+        """Entries (newest first) and the records they need, then other records, within budget."""
+        chosen_records: list[int] = []
+        chosen_entries: list[int] = []
+        in_records = set()
+        for slot in entry_slots:
+            extra = [int(slot)] if records[slot] and slot not in in_records else []
+            if size_of(n_clocks, n_acks, len(chosen_records) + len(extra), len(chosen_entries) + 1) > budget:
+                break
+            chosen_records += extra
+            in_records.update(extra)
+            chosen_entries.append(int(slot))
+        for slot in np.flatnonzero(records):
+            if slot in in_records:
+                continue
+            if size_of(n_clocks, n_acks, len(chosen_records) + 1, len(chosen_entries)) > budget:
+                break
+            chosen_records.append(int(slot))
+        return np.array(chosen_records, dtype=np.int64), np.array(chosen_entries, dtype=np.int64)
+
+    # ------------------------------------------------------------------ views
+    def winners(self) -> dict[int, int]:
+        """Task key -> winner index (NO_WINNER, DONE or a robot index) as this robot believes."""
+        return {t.key: int(self.z[s]) for s, t in enumerate(self.tasks)}
+
+    def path_keys(self) -> list[int]:
+        """This robot's path as task keys, in execution order."""
+        return [self.tasks[j].key for j in self.path]
+
+    def path_length(self) -> float:
+        """Length of this robot's path from its position, in metres."""
+        if self._geometry is None:
+            self._geometry = PathGeometry(self.robot.position, task_positions(self.tasks))
+        return self._geometry.path_length(self.path)
