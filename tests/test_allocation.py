@@ -426,3 +426,17 @@ def test_multi_hop_chain_relays_tasks_and_liveness():
     assert all(not agent.failed for agent in simulation.agents.values())
     assert found.key in {t.key for t in simulation.agents[3].tasks}
     assert report.paths == sequential_greedy(robots, [*tasks, found], AuctionParams()).paths
+
+
+def test_each_robot_keeps_what_its_neighbours_last_bid():
+    # three robots 10 m apart, each with three tasks next to it: each wins its own
+    robots = [RobotProfile(f"r{i}", i, [10.0 * i, 0.0, -1.0]) for i in range(3)]
+    tasks = [Task.create(task_key(255, j), [10.0 * (j % 3) + 0.3 * j, 1.0, -1.0]) for j in range(9)]
+    simulation, report = run(robots, tasks, ChannelParams())
+    agent = simulation.agents[0]
+    for peer in (1, 2):
+        assert len(report.paths[peer]) == 3
+        said = agent.neighbour_bids(peer)
+        for key in report.paths[peer]:
+            winner, bid, heard_s = said[key]
+            assert winner == peer and bid > 0 and 0 < heard_s <= report.end_time_s

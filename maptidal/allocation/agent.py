@@ -9,7 +9,9 @@ Deltas: a robot sends an entry only to neighbours not known to hold its current 
 from acknowledgements (a neighbour acks a message sequence number, and the robot remembers what that
 message carried) and from the neighbour's own messages: an entry it sent that the receiver agrees with
 after conflict resolution is held by both. When the two still disagree after resolution, the receiver
-marks the entry as not held, so its view goes back. That replaces CBBA's every-round full broadcast.
+marks the entry as not held, so its view goes back. An entry sent but not yet acknowledged is not
+held either (the peer may have either value), so a value that changes and changes back is still sent.
+That replaces CBBA's every-round full broadcast.
 """
 
 from __future__ import annotations
@@ -80,6 +82,16 @@ class AgentStats:
 _decode = functools.lru_cache(maxsize=256)(decode)
 
 
+_UNKNOWN = -3  # a peer's view of an entry that must be sent again
+_HISTORY = np.dtype([("winner", np.int64), ("bid", np.float64), ("heard_ms", np.int64)])
+
+
+def _empty_history(n: int) -> np.ndarray:
+    history = np.zeros(n, dtype=_HISTORY)
+    history["heard_ms"] = -1
+    return history
+
+
 def _ms(time_s: float) -> int:
     return round(time_s * 1000.0)
 
@@ -111,10 +123,13 @@ class CBBAAgent:
         self.path: list[int] = []
         self.clocks = np.full(MAX_ROBOTS, NEVER, dtype=np.int64)
         self.failed: set[int] = set()
-        self._peer_entry: dict[int, np.ndarray] = {}  # version of my entry each peer holds (-1 = not)
+        # my (winner, bid) each peer is known to hold; UNKNOWN when it must hear my view again
+        self._peer_z: dict[int, np.ndarray] = {}
+        self._peer_y: dict[int, np.ndarray] = {}
         self._peer_task: dict[int, np.ndarray] = {}  # whether each peer knows each task record
+        self.bid_history: dict[int, np.ndarray] = {}  # per neighbour: what it last said per task
         self._seq = 0
-        self._sent: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._sent: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
         self._last_seq_from: dict[int, int] = {}
         self._ack_owed: dict[int, int] = {}
         self._last_sent_ms: int | None = None
@@ -163,9 +178,14 @@ class CBBAAgent:
         self._feasible = np.concatenate(
             [self._feasible, np.array([self.robot.can_do(t.requires) for t in fresh], dtype=bool)]
         )
-        for peer in list(self._peer_entry):
-            self._peer_entry[peer] = np.concatenate([self._peer_entry[peer], np.zeros(n_new, dtype=np.int64)])
+        for peer in list(self._peer_z):
+            # a peer that learns a task starts it at "nobody wins"
+            self._peer_z[peer] = np.concatenate(
+                [self._peer_z[peer], np.full(n_new, NO_WINNER, dtype=np.int64)]
+            )
+            self._peer_y[peer] = np.concatenate([self._peer_y[peer], np.zeros(n_new)])
             self._peer_task[peer] = np.concatenate([self._peer_task[peer], np.zeros(n_new, dtype=bool)])
+            self.bid_history[peer] = np.concatenate([self.bid_history[peer], _empty_history(n_new)])
         for peer in (*known_to, *(() if from_robot is None else (from_robot,))):
             if peer != self.index:
                 self._peer_task_array(peer)[start:] = True
@@ -212,9 +232,26 @@ class CBBAAgent:
     # ------------------------------------------------------------------ state changes
     def _peer_task_array(self, peer: int) -> np.ndarray:
         if peer not in self._peer_task:
-            self._peer_entry[peer] = np.zeros(self.n_tasks, dtype=np.int64)
+            self._peer_z[peer] = np.full(self.n_tasks, NO_WINNER, dtype=np.int64)
+            self._peer_y[peer] = np.zeros(self.n_tasks)
             self._peer_task[peer] = np.zeros(self.n_tasks, dtype=bool)
+            self.bid_history[peer] = _empty_history(self.n_tasks)
         return self._peer_task[peer]
+
+    def neighbour_bids(self, peer: int) -> dict[int, tuple[int, float, float]]:
+        """What `peer` last told this robot about each task: key -> (winner, bid, time heard in s)."""
+        history = self.bid_history.get(peer)
+        if history is None:
+            return {}
+        said = np.flatnonzero(history["heard_ms"] >= 0)
+        return {
+            self.tasks[j].key: (
+                int(history["winner"][j]),
+                float(history["bid"][j]),
+                history["heard_ms"][j] / 1000,
+            )
+            for j in said
+        }
 
     def _set(self, slots, winner, bid) -> None:
         self._tick += 1
@@ -387,9 +424,8 @@ class CBBAAgent:
         for robot, seq in acks:
             if robot != self.index or seq not in self._sent:
                 continue
-            slots, versions, task_slots = self._sent[seq]
-            held = self._peer_entry[sender]
-            held[slots] = np.maximum(held[slots], versions)
+            slots, winners, bids, task_slots = self._sent[seq]
+            self._peer_z[sender][slots], self._peer_y[sender][slots] = winners, bids
             self._peer_task[sender][task_slots] = True
 
     def _resolve(self, message: Message, clocks_sender: np.ndarray, now_s: float) -> None:
@@ -401,6 +437,8 @@ class CBBAAgent:
             self.stats.unknown_task_entries += int((~known).sum())
             slots, z_k, y_k = slots[known], z_k[known], y_k[known]
         self._peer_task[sender][slots] = True
+        history = self.bid_history[sender]
+        history["winner"][slots], history["bid"][slots], history["heard_ms"][slots] = z_k, y_k, _ms(now_s)
         if (z_k == DONE).any():
             news = (z_k == DONE) & (self.z[slots] != DONE)
             if news.any():
@@ -412,10 +450,11 @@ class CBBAAgent:
         if self.failed:
             gone = np.isin(z_k, list(self.failed))
             z_k, y_k = np.where(gone, NO_WINNER, z_k), np.where(gone, 0.0, y_k)
-        held = self._peer_entry[sender]
+        held_z, held_y = self._peer_z[sender], self._peer_y[sender]
         # identical entries resolve to no change in every row of the table; only differences need it
         differ = (self.z[slots] != z_k) | (self.y[slots] != y_k)
-        held[slots] = np.where(differ, held[slots], self._version[slots])
+        same = slots[~differ]
+        held_z[same], held_y[same] = self.z[same], self.y[same]
         if not differ.any():
             return
         slots, z_k, y_k = slots[differ], z_k[differ], y_k[differ]
@@ -434,7 +473,8 @@ class CBBAAgent:
             self._release_outbid()
         # what the sender holds: my value where we agree now; otherwise it must hear my view
         agree = (self.z[slots] == z_k) & (self.y[slots] == y_k)
-        held[slots] = np.where(agree, self._version[slots], -1)
+        held_z[slots] = np.where(agree, self.z[slots], _UNKNOWN)
+        held_y[slots] = self.y[slots]
 
     # ------------------------------------------------------------------ sending
     def _pending(self, peers: list[int]) -> tuple[np.ndarray, np.ndarray]:
@@ -442,7 +482,7 @@ class CBBAAgent:
         records = np.zeros(self.n_tasks, dtype=bool)
         for peer in peers:
             self._peer_task_array(peer)
-            entries |= self._version > self._peer_entry[peer]
+            entries |= (self.z != self._peer_z[peer]) | (self.y != self._peer_y[peer])
             records |= ~self._peer_task[peer]
         return entries, records
 
@@ -493,7 +533,14 @@ class CBBAAgent:
             bids=self.y[entry_slots],
         )
         data = encode(message)
-        self._sent[self._seq] = (entry_slots, self._version[entry_slots].copy(), record_slots)
+        self._sent[self._seq] = (entry_slots, self.z[entry_slots], self.y[entry_slots], record_slots)
+        # until acknowledged, a peer may hold either its old value or this one: it must not be assumed
+        # to hold the old one should this robot's value return to it
+        for peer in peers:
+            differs = (self._peer_z[peer][entry_slots] != message.winners) | (
+                self._peer_y[peer][entry_slots] != message.bids
+            )
+            self._peer_z[peer][entry_slots[differs]] = _UNKNOWN
         self._sent.pop(self._seq - _SENT_MEMORY, None)
         for robot, _ in acks:
             del self._ack_owed[robot]
