@@ -440,3 +440,82 @@ def test_each_robot_keeps_what_its_neighbours_last_bid():
         for key in report.paths[peer]:
             winner, bid, heard_s = said[key]
             assert winner == peer and bid > 0 and 0 < heard_s <= report.end_time_s
+
+
+event_st = st.tuples(
+    st.floats(0, 600), st.sampled_from(["fail", "join", "discover", "done"]), st.integers(0, 10**6)
+)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 100_000),
+    n_robots=st.integers(2, 5),
+    n_tasks=st.integers(2, 20),
+    raw_events=st.lists(event_st, min_size=1, max_size=5),
+    loss=st.floats(0, 0.4),
+    bundle_limit=st.sampled_from([0, 3, 6]),
+)
+def test_random_failures_joins_discoveries_and_completions_end_consistent(
+    seed, n_robots, n_tasks, raw_events, loss, bundle_limit
+):
+    """Mixed dynamics over a lossy, intermittent channel (this test found a value that changed and
+    changed back while unacknowledged being taken as already held by a peer)."""
+    robots, tasks = random_instance(n_robots, n_tasks, seed, heterogeneous=seed % 2 == 0)
+    events, next_index, counters = [], n_robots, {}
+    for time_s, kind, pick in raw_events:
+        robot = pick % n_robots
+        if kind == "fail":
+            events.append(AuctionEvent(time_s, "fail", robot=robot))
+        elif kind == "join":
+            where = np.random.default_rng(pick).uniform([0, 0, -3], [20, 10, 0])
+            kit = capability_mask(["camera", "tool"])
+            profile = RobotProfile(f"j{next_index}", next_index, where, capabilities=kit)
+            events.append(AuctionEvent(time_s, "join", profile=profile))
+            next_index += 1
+        elif kind == "discover":
+            counters[robot] = counters.get(robot, -1) + 1
+            where = np.random.default_rng(pick).uniform([0, 0, -3], [20, 10, 0])
+            events.append(
+                AuctionEvent(
+                    time_s, "discover", robot=robot, task=Task.create(task_key(robot, counters[robot]), where)
+                )
+            )
+        else:
+            events.append(AuctionEvent(time_s, "done", robot=robot, task_key=tasks[pick % n_tasks].key))
+    channel = ChannelParams(
+        loss=loss, seed=seed, jitter_s=1.0, mean_up_s=40, mean_down_s=10, random_outages_until_s=700
+    )
+    auction = AuctionParams(bundle_limit=bundle_limit)
+    _, report = run(robots, tasks, channel, auction, events, AgentParams(90.0, 30.0), max_time_s=30_000)
+    assert report.converged and report.conflicts == 0 and report.disagreements == 0
+    held = [k for path in report.paths.values() for k in path]
+    assert len(held) == len(set(held))
+    if bundle_limit == 0 and report.alive:
+        assert report.unassigned == []
+
+
+def test_a_value_that_returns_to_its_old_value_before_an_ack_is_still_sent():
+    """Robot 2 tells robot 0 it holds two tasks, then loses the first to robot 3, which releases the
+    second back to 'nobody' (the value robot 0 had before). Robot 0 never acknowledged the first
+    message, so robot 2 cannot assume robot 0 still has 'nobody'; it must send the release."""
+    tasks = [Task.create(task_key(255, 0), [1.0, 0, 0]), Task.create(task_key(255, 1), [2.0, 0, 0])]
+    robots = {i: RobotProfile(f"r{i}", i, [0.0, 0.0, 0.0]) for i in (0, 2)}
+    agents = {i: CBBAAgent(r) for i, r in robots.items()}
+    for agent in agents.values():
+        agent.add_tasks(tasks, known_to=(0, 2, 3))
+        agent.clocks[[0, 2, 3]] = 0
+    holder, listener = agents[2], agents[0]
+    holder.build_bundle(1.0)
+    assert [holder.tasks[j].key for j in holder.bundle] == [tasks[0].key, tasks[1].key]
+    listener.receive(holder.make_message(1.0), 1.1)
+    assert listener.winners()[tasks[1].key] == 2
+    outbid = Message(
+        3, 1, np.array([0, 0, 0, 2000]), [], [], np.array([tasks[0].key]), np.array([3]), np.array([5000.0])
+    )
+    holder.receive(encode(outbid), 2.0)
+    assert holder.winners()[tasks[1].key] == NO_WINNER  # released after losing the first entry
+    update = holder.make_message(3.0)
+    assert tasks[1].key in decode(update).keys.tolist()
+    listener.receive(update, 3.1)
+    assert listener.winners()[tasks[1].key] != 2
