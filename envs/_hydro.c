@@ -18,6 +18,7 @@
 #define HEADER 4
 #define BLOCK 84
 #define SLOT_HULL 80     /* hull height (m), for the wet fraction */
+#define SLOT_THRUST_FADE 82 /* half-width (m) of a thruster's fade-out at the water surface */
 #define SLOT_CORIOLIS 81 /* 1: include C_A(nu_r) nu_r */
 #define MAX_THRUSTERS 8
 
@@ -57,10 +58,15 @@ void maptidal_hydro_passive(const mjModel* m, mjData* d) {
       continue; /* leave NaN detection to the simulation's check */
 
     mjtNum thrust[6] = {0, 0, 0, 0, 0, 0};
+    mjtNum surface_z = d->userdata[3], fade = p[SLOT_THRUST_FADE], cg_z = d->xipos[3 * body + 2];
     for (int t = 0; t < nthr && t < MAX_THRUSTERS; t++) {
       mjtNum a = d->act[act + t];
       mjtNum force = a >= 0 ? a * fmax_fwd : a * fmax_rev;
       const mjtNum *pos = thr + 6 * t, *dir = thr + 6 * t + 3;
+      /* a propeller in air pushes nothing: fade linearly across the surface */
+      mjtNum below = surface_z - (cg_z + R[6] * pos[0] + R[7] * pos[1] + R[8] * pos[2]);
+      mjtNum wet_t = fade > 0 ? below / (2 * fade) + 0.5 : (below > 0 ? 1.0 : 0.0);
+      force *= wet_t < 0 ? 0 : (wet_t > 1 ? 1 : wet_t);
       mjtNum f[3] = {force * dir[0], force * dir[1], force * dir[2]}, mom[3];
       cross(pos, f, mom);
       for (int i = 0; i < 3; i++) {

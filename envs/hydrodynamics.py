@@ -63,6 +63,7 @@ HEADER = 4  # magic, number of robots, enabled flag, water surface height (m)
 BLOCK = 84  # doubles per robot
 SLOT_HULL = 80  # hull height (m), for the wet fraction near the surface
 SLOT_CORIOLIS = 81  # 1.0: include C_A(nu_r) nu_r
+SLOT_THRUST_FADE = 82  # half-width (m) of a thruster's fade-out at the water surface
 MAX_THRUSTERS = 8
 _SOURCE = Path(__file__).with_name("_hydro.c")
 
@@ -115,6 +116,7 @@ def pack_userdata(
         block[31 : 31 + len(layout)] = layout
         block[SLOT_HULL] = vehicle.hull_size[2]
         block[SLOT_CORIOLIS] = 1.0 if vehicle.added_mass_coriolis else 0.0
+        block[SLOT_THRUST_FADE] = vehicle.thruster.surface_fade_m
         userdata[HEADER + k * BLOCK : HEADER + (k + 1) * BLOCK] = block
 
 
@@ -129,6 +131,16 @@ def thruster_forces(act: np.ndarray, max_forward_n: float, max_reverse_n: float)
     return np.where(act >= 0.0, act * max_forward_n, act * max_reverse_n)
 
 
+def thruster_wet_fractions(
+    thruster_positions: np.ndarray, rotation: np.ndarray, cg_z: float, surface_z: float, fade_m: float
+) -> np.ndarray:
+    """How much of each thruster's thrust acts: 1 under water, 0 in air, linear across the surface."""
+    depth_below = surface_z - (cg_z + np.asarray(thruster_positions, float) @ np.asarray(rotation)[2])
+    if fade_m <= 0:
+        return (depth_below > 0).astype(float)
+    return np.clip(depth_below / (2.0 * fade_m) + 0.5, 0.0, 1.0)
+
+
 def body_wrench(
     vehicle: VehicleParams,
     rotation: np.ndarray,
@@ -138,12 +150,14 @@ def body_wrench(
     gravity: np.ndarray,
     current_world: np.ndarray | None = None,
     wet_fraction: float = 1.0,
+    thruster_wet: np.ndarray | None = None,
 ) -> np.ndarray:
     """The wrench ``(6,)`` [force; torque] at the CG, body frame, that MuJoCo must add.
 
     ``rotation`` is body-to-world ``(3, 3)``. The result excludes gravity and the
     rigid-body Coriolis terms (MuJoCo computes those) and includes added mass
-    solved within the step (see the module docstring).
+    solved within the step (see the module docstring). ``thruster_wet`` scales each
+    thruster's force (see :func:`thruster_wet_fractions`; default all 1).
     """
     R = np.asarray(rotation, float)
     w = np.asarray(angular_velocity_body, float)
@@ -153,6 +167,8 @@ def body_wrench(
     nur = np.concatenate([vr, w])
     added = np.asarray(vehicle.added_mass)
     forces = thruster_forces(act, vehicle.thruster.max_forward_n, vehicle.thruster.max_reverse_n)
+    if thruster_wet is not None:
+        forces = forces * np.asarray(thruster_wet, float)
     positions = np.asarray(vehicle.thruster_positions)
     directions = np.asarray(vehicle.thruster_directions)
     thrust_f = forces @ directions
@@ -191,6 +207,9 @@ def passive_forces(model: mujoco.MjModel, data: mujoco.MjData) -> None:
         R = data.xmat[body].reshape(3, 3)
         hull = block[SLOT_HULL]
         wet = (ud[3] - (data.xipos[body, 2] - 0.5 * hull)) / hull if hull > 0 else 1.0
+        thruster_wet = thruster_wet_fractions(
+            layout[:, :3], R, data.xipos[body, 2], ud[3], block[SLOT_THRUST_FADE]
+        )
         wrench = body_wrench(
             vehicle,
             R,
@@ -200,6 +219,7 @@ def passive_forces(model: mujoco.MjModel, data: mujoco.MjData) -> None:
             model.opt.gravity,
             block[26:29],
             float(np.clip(wet, 0.0, 1.0)),
+            thruster_wet,
         )
         if not np.all(np.isfinite(wrench)):
             continue
@@ -223,7 +243,7 @@ def _vehicle_from_block(block, layout, mass, inertia) -> VehicleParams:
         hull_size=(1.0, 1.0, max(float(block[SLOT_HULL]), 1e-6)),
         thruster_positions=tuple(map(tuple, layout[:, :3])),
         thruster_directions=tuple(map(tuple, layout[:, 3:])),
-        thruster=ThrusterParams(float(block[29]), float(block[30]), 0.1),
+        thruster=ThrusterParams(float(block[29]), float(block[30]), 0.1, float(block[SLOT_THRUST_FADE])),
         added_mass_coriolis=bool(block[SLOT_CORIOLIS]),
     )
 

@@ -23,13 +23,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import mujoco
 import numpy as np
 
 from controllers.convention import pilot_command
 from controllers.mixing import MixerParams, mix
 from envs import hydrodynamics
-from envs.rendering import render_camera
+from envs.rendering import depth_coefficients, render_camera
 from envs.scenario import Scenario, load_scenario
 from envs.sensors import RobotSensors
 from envs.water import WaterModel, depth_to_range
@@ -96,6 +97,7 @@ class Simulation:
             self._mixers[robot.name] = MixerParams(frame=robot.vehicle.ardusub_frame)
         self.water = WaterModel(self.scenario.water)
         self._ray_scale: np.ndarray | None = None
+        self._depth_shift, self._depth_scale = (float(v) for v in depth_coefficients(self.model))
         self.rng = np.random.default_rng()
         self.wall_time_s = 0.0
         self.reset()
@@ -228,20 +230,31 @@ class Simulation:
         cam = self.camera
         images, depths = [], []
         for side in ("left", "right"):
-            rgb, planar = render_camera(self.model, self.data, f"{robot}/{side}", cam.height, cam.width)
+            rgb, buffer = render_camera(
+                self.model,
+                self.data,
+                f"{robot}/{side}",
+                cam.height,
+                cam.width,
+                with_depth=water or depth,
+                raw_depth=True,
+            )
+            if buffer is not None:
+                buffer = cv2.add(cv2.flip(buffer, 0), self._depth_shift)
             if water:
-                rgb = self.water.apply(rgb, self._range(planar), self.rng)
+                # range along each ray = (ray length per unit depth x d) / (buffer + c), in one division
+                rgb = self.water.apply(rgb, cv2.divide(self._range_numerator(buffer), buffer), self.rng)
             images.append(rgb)
-            depths.append(planar)
+            if depth:
+                depths.append(cv2.divide(self._depth_scale, buffer))
         return (*images, *depths) if depth else tuple(images)
 
-    def _range(self, planar: np.ndarray) -> np.ndarray:
+    def _range_numerator(self, like: np.ndarray) -> np.ndarray:
         if self._ray_scale is None:
             cam = self.camera
-            self._ray_scale = depth_to_range(
-                np.ones_like(planar), cam.fx, cam.fy, cam.width / 2, cam.height / 2
-            )
-        return planar * self._ray_scale
+            ray_scale = depth_to_range(np.ones_like(like), cam.fx, cam.fy, cam.width / 2, cam.height / 2)
+            self._ray_scale = (ray_scale * self._depth_scale).astype(np.float32)
+        return self._ray_scale
 
     def intrinsics(self) -> dict:
         """Calibration of each stereo camera: K matrix, image size, baseline (m), and the

@@ -25,11 +25,16 @@ class VehicleConfigError(ValueError):
 
 @dataclass(frozen=True)
 class ThrusterParams:
-    """Blue Robotics T200 (legacy spec at 16 V): thrust limits and command-to-thrust lag."""
+    """Blue Robotics T200 (legacy spec at 16 V): thrust limits and command-to-thrust lag.
+
+    surface_fade_m: a thruster's thrust fades linearly from full, when its centre is this far under
+    the water surface, to none, when it is this far above (half the T200's ~0.1 m duct; a propeller
+    in air pushes nothing, and one breaking the surface ventilates)."""
 
     max_forward_n: float = 50.0
     max_reverse_n: float = 40.0
     time_constant_s: float = 0.1
+    surface_fade_m: float = 0.05
 
 
 @dataclass(frozen=True)

@@ -159,3 +159,42 @@ def test_collision_with_the_wall_is_reported():
     contacts = sim.contacts()
     assert contacts and all(c.robot == "rov0" and c.other == "tank" for c in contacts)
     assert max(c.normal_force_n for c in contacts) > 1.0
+
+
+def test_thrusters_lose_thrust_across_the_water_surface():
+    level = np.eye(3)
+    positions = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.05], [0.0, 0.0, -0.5]])
+    wet = hydrodynamics.thruster_wet_fractions(positions, level, cg_z=10.0, surface_z=10.0, fade_m=0.05)
+    np.testing.assert_allclose(wet, [0.5, 0.0, 1.0])
+    # rolled 90 deg about x: the body's +y now points up, so a thruster at +y rises with it
+    rolled = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
+    up = hydrodynamics.thruster_wet_fractions([[0, 0.2, 0]], rolled, cg_z=9.9, surface_z=10.0, fade_m=0.05)
+    assert up[0] == 0.0
+
+
+def test_a_vehicle_in_air_gets_no_thrust_and_one_under_water_does():
+    speeds = {}
+    for height in (16.0, -1.0):  # metres above the surface of OPEN_WATER (z = 30)
+        sim = open_water("heavy")
+        sim.data.qpos[2] = 30.0 + height
+        mujoco.mj_forward(sim.model, sim.data)
+        run(sim, {"surge": 1.0}, 0.5)
+        speeds[height] = sim.ground_truth("rov")["velocity_body"][0]
+    assert abs(speeds[16.0]) < 1e-3  # falling through air, propellers spinning in vain
+    assert speeds[-1.0] > 0.2
+
+
+def test_native_and_numpy_agree_for_thrusters_at_the_surface():
+    sim = open_water("heavy")
+    rng = np.random.default_rng(8)
+    for _ in range(5):
+        sim.data.qpos[2] = 30.0 + rng.uniform(-0.2, 0.2)
+        quat = rng.normal(size=4)
+        sim.data.qpos[3:7] = quat / np.linalg.norm(quat)
+        sim.data.act[:] = rng.uniform(-1, 1, 8)
+        forces = {}
+        for backend in ("numpy", "native"):
+            assert hydrodynamics.install_callback(prefer_native=backend == "native") == backend
+            mujoco.mj_forward(sim.model, sim.data)
+            forces[backend] = sim.data.qfrc_passive.copy()
+        np.testing.assert_allclose(forces["native"], forces["numpy"], rtol=1e-9, atol=1e-9)

@@ -162,3 +162,15 @@ def test_sim_cli_prints_the_final_state(tmp_path, capsys):
     assert len(list(tmp_path.glob("rov0_*.png"))) == 2
     with pytest.raises(SystemExit):
         main(["sim", "--help"])
+
+
+def test_camera_noise_has_the_requested_spread_and_changes_every_frame():
+    model = WaterModel(WaterParams(turbidity=0.0, noise_sigma=4.0))
+    flat = np.full((200, 300, 3), 128, np.uint8)
+    ranges = np.zeros((200, 300))
+    rng = np.random.default_rng(3)
+    first, second = model.apply(flat, ranges, rng), model.apply(flat, ranges, rng)
+    for frame in (first, second):
+        assert abs(frame.astype(float).std() - 4.0) < 0.2
+        assert abs(frame.astype(float).mean() - 128.0) < 0.2
+    assert np.corrcoef(first.ravel().astype(float), second.ravel().astype(float))[0, 1] < 0.05
