@@ -34,13 +34,14 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from maptidal.geometry import CameraModel, SpatialGrid, count_in_frustums, view_angles
+from maptidal.geometry import CameraModel, SpatialGrid, count_in_frustums, frustum_count_bounds, view_angles
 
 __all__ = [
     "DiscoveryInputError",
     "DiscoveryParams",
     "DiscoveryResult",
     "calculate_scores",
+    "confirm",
     "discover",
     "generate_points",
     "prune",
@@ -130,12 +131,21 @@ class DiscoveryResult:
 
     cips: np.ndarray
     after_prune: np.ndarray
-    scores: np.ndarray
     confirmed: np.ndarray
     remains: np.ndarray
     final: np.ndarray
     pruning_mode: str
     params: DiscoveryParams = field(default_factory=DiscoveryParams)
+    keypoints: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+    _scores: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def scores(self) -> np.ndarray:
+        """Alg. 3's score of each pruned CIP, exact (computed on first use: discovery itself only needs
+        to know which side of the threshold each score lies, which bounds decide for most CIPs)."""
+        if self._scores is None:
+            self._scores = calculate_scores(self.after_prune, self.keypoints, self.params.camera)
+        return self._scores
 
     @property
     def counts(self) -> dict[str, int]:
@@ -366,6 +376,33 @@ def calculate_scores(candidates: np.ndarray, keypoints: np.ndarray, camera: Came
     return count_in_frustums(candidates, keypoints, camera) / len(keypoints)
 
 
+def confirm(
+    candidates: np.ndarray, keypoints: np.ndarray, camera: CameraModel, threshold: float
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Alg. 1's test S >= t for every candidate, exactly as calculate_scores would decide it.
+
+    Count bounds from a grid of keypoint cells (geometry.frustum_count_bounds) settle most candidates:
+    an upper bound below t*K rejects, a lower bound at or above it confirms. Only the rest are counted
+    point by point. Returns the mask and, when every candidate had to be counted, the exact scores
+    (else None: DiscoveryResult computes them when asked)."""
+    keypoints = np.asarray(keypoints, dtype=float).reshape(-1, 3)
+    if len(keypoints) == 0:
+        raise DiscoveryInputError("there are no keypoints to score against")
+    total = len(keypoints)
+    lower, upper = frustum_count_bounds(candidates, keypoints, camera)
+    # compare as calculate_scores does (count / K >= t), so rounding decides alike
+    confirmed = lower / total >= threshold
+    undecided = np.flatnonzero(~confirmed & (upper / total >= threshold))
+    if len(undecided) == len(candidates):
+        scores = count_in_frustums(candidates, keypoints, camera) / total
+        return scores >= threshold, scores
+    if len(undecided):
+        confirmed[undecided] = (
+            count_in_frustums(candidates[undecided], keypoints, camera) / total >= threshold
+        )
+    return confirmed, None
+
+
 def discover(
     vertices: object,
     faces: object,
@@ -400,17 +437,17 @@ def discover(
     else:
         after_prune, mode = prune(cips, existing_rows, 0, params)
 
-    scores = calculate_scores(after_prune, keypoint_array, params.camera)
-    is_confirmed = scores >= params.threshold
+    is_confirmed, scores = confirm(after_prune, keypoint_array, params.camera, params.threshold)
     confirmed, remains = after_prune[is_confirmed], after_prune[~is_confirmed]
     final, _ = prune(remains, confirmed, 1, params)
     return DiscoveryResult(
         cips=cips,
         after_prune=after_prune,
-        scores=scores,
         confirmed=confirmed,
         remains=remains,
         final=final,
         pruning_mode=mode,
         params=params,
+        keypoints=keypoint_array,
+        _scores=scores,
     )

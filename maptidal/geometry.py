@@ -255,6 +255,55 @@ def count_in_frustums(
     return counts
 
 
+def frustum_count_bounds(
+    viewpoints: np.ndarray,
+    points: np.ndarray,
+    camera: CameraModel,
+    cell_size: float | None = None,
+    max_pairs: int = 262_144,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds on the number of points inside each viewpoint's frustum.
+
+    The points are binned into cubes of ``cell_size`` (default range / 8). A cube whose bounding ball
+    lies wholly inside a frustum adds its points to both bounds; one whose ball reaches the frustum
+    adds them to the upper bound only; the rest add nothing. Each test is one signed distance per
+    frustum face, so the bounds cost cells x viewpoints, not points x viewpoints, and
+    ``lower <= exact count <= upper`` holds for every viewpoint.
+    """
+    viewpoints = np.asarray(viewpoints, dtype=float).reshape(-1, 6)
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    lower = np.zeros(len(viewpoints), dtype=np.int64)
+    upper = np.zeros(len(viewpoints), dtype=np.int64)
+    if len(viewpoints) == 0 or len(points) == 0:
+        return lower, upper
+    size = cell_size or camera.range_m / 8.0
+    cells, counts = np.unique(np.floor(points / size).astype(np.int64), axis=0, return_counts=True)
+    centres = (cells + 0.5) * size
+    # a margin far above rounding keeps the bounds rigorous at the boundaries
+    ball = size * math.sqrt(3.0) / 2.0 + 1e-9 * max(1.0, float(np.abs(centres).max()))
+    side_h = 1.0 / math.hypot(1.0, camera.tan_half_h)  # turns depth*tan - |x| into a distance
+    side_v = 1.0 / math.hypot(1.0, camera.tan_half_v)
+    frames = _view_frames(viewpoints)
+    columns = np.ascontiguousarray(centres.T)
+    chunk = max(1, max_pairs // len(centres))
+    for start in range(0, len(viewpoints), chunk):
+        batch = slice(start, start + chunk)
+        offsets = [columns[k][None, :] - viewpoints[batch, k, None] for k in range(3)]
+        depth, x, y = (
+            frames[batch, j, 0, None] * offsets[0]
+            + frames[batch, j, 1, None] * offsets[1]
+            + frames[batch, j, 2, None] * offsets[2]
+            for j in range(3)
+        )
+        # signed distance of each cell centre to the nearest frustum face (positive inside)
+        distance = np.minimum(depth, camera.range_m - depth)
+        np.minimum(distance, (depth * camera.tan_half_h - np.abs(x)) * side_h, out=distance)
+        np.minimum(distance, (depth * camera.tan_half_v - np.abs(y)) * side_v, out=distance)
+        lower[batch] = (distance >= ball).astype(np.int64) @ counts
+        upper[batch] = (distance >= -ball).astype(np.int64) @ counts
+    return lower, upper
+
+
 def view_angles(direction: np.ndarray, others: np.ndarray) -> np.ndarray:
     """Angles (rad) between one unit direction and each row of ``others``.
 

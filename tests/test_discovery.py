@@ -326,3 +326,27 @@ def test_bad_existing_tasks_and_keypoints_get_a_clear_error():
 def test_bad_parameters_get_a_clear_error(field):
     with pytest.raises(DiscoveryInputError):
         DiscoveryParams(**field)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_confirm_decides_exactly_as_the_scores_do(seed):
+    """Bounds settle most CIPs; the decision must still equal S >= t, including t equal to a score."""
+    from maptidal.discovery import calculate_scores, confirm
+
+    vertices, faces = wall_grid_mesh(3000, seed=seed)
+    candidates = generate_points(vertices, faces, DiscoveryParams().standoff)[::7]
+    camera = DiscoveryParams().camera
+    scores = calculate_scores(candidates, vertices, camera)
+    for threshold in (0.0, float(np.median(scores)), float(scores.max()), 0.75, 1.0):
+        mask, _ = confirm(candidates, vertices, camera, threshold)
+        np.testing.assert_array_equal(mask, scores >= threshold)
+
+
+def test_result_scores_are_exact_when_asked():
+    from maptidal.discovery import calculate_scores
+
+    vertices, faces = wall_grid_mesh(2000, seed=5)
+    result = discover(vertices, faces)
+    np.testing.assert_array_equal(
+        result.scores, calculate_scores(result.after_prune, vertices, result.params.camera)
+    )

@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.spatial import Delaunay
 
 from maptidal.geometry import (
@@ -11,6 +13,7 @@ from maptidal.geometry import (
     count_in_frustums,
     frustum_bounding_spheres,
     frustum_corners,
+    frustum_count_bounds,
     in_frustum,
 )
 
@@ -100,3 +103,19 @@ def test_camera_rejects_bad_values():
     for bad in ({"hfov_deg": 0}, {"vfov_deg": 180}, {"range_m": -1}, {"range_m": float("nan")}):
         with pytest.raises(ValueError):
             CameraModel(**bad)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 100_000), cell=st.sampled_from([None, 0.05, 0.3, 1.0]), flat=st.booleans())
+def test_count_bounds_bracket_the_exact_count(seed, cell, flat):
+    rng = np.random.default_rng(seed)
+    camera = CameraModel(72.0, 57.0, 2.0)
+    points = rng.uniform(-3, 3, (3000, 3))
+    if flat:  # a wall, as discovery sees it: many points on one plane, some on frustum faces
+        points[:, 0] = 1.0
+    viewpoints = np.hstack([rng.uniform(-1, 1, (60, 3)), _unit(rng.normal(size=(60, 3)))])
+    viewpoints[:10, 3:] = [1.0, 0.0, 0.0]  # some look straight at the wall
+    exact = count_in_frustums(viewpoints, points, camera)
+    lower, upper = frustum_count_bounds(viewpoints, points, camera, cell_size=cell, max_pairs=5000)
+    assert np.all(lower <= exact) and np.all(exact <= upper)
+    assert upper.sum() > 0
