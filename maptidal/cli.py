@@ -440,6 +440,9 @@ def _cmd_allocate(args: argparse.Namespace) -> int:
         f"conflicts {summary['conflicts']}, disagreements {summary['disagreements']}, "
         f"unassigned {summary['unassigned'] or 'none'}, greedy ratio {summary['greedy_ratio']:.3f}"
     )
+    if summary["failed"]:
+        failed = ", ".join(summary["failed"])
+        print(f"failed robots: {failed}; infeasible: {summary['infeasible']}; lost: {summary['lost']}")
     if summary["rejected_messages"]:
         print(f"rejected messages: {summary['rejected_messages']}")
     for label, path in (("result", args.out), ("plot", args.plot)):

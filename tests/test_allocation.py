@@ -519,3 +519,12 @@ def test_a_value_that_returns_to_its_old_value_before_an_ack_is_still_sent():
     assert tasks[1].key in decode(update).keys.tolist()
     listener.receive(update, 3.1)
     assert listener.winners()[tasks[1].key] != 2
+
+
+def test_a_task_only_a_failed_robot_knew_is_reported_lost_not_unassigned():
+    robots, tasks = random_instance(3, 4, 2)
+    secret = Task.create(task_key(2, 0), [5.0, 5.0, -1.0])
+    events = [AuctionEvent(0.0, "fail", robot=2), AuctionEvent(0.0, "discover", robot=2, task=secret)]
+    _, report = run(robots, tasks, ChannelParams(), events=sorted(events, key=lambda e: e.kind))
+    assert report.lost == [secret.key]
+    assert report.unassigned == [] and report.conflicts == 0

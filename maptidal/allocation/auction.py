@@ -63,6 +63,7 @@ class AuctionReport:
     disagreements: int
     unassigned: list[int]
     infeasible: list[int]
+    lost: list[int]
     paths: dict[int, list[int]]
     lengths: dict[int, float]
     names: dict[int, str]
@@ -231,15 +232,20 @@ class AuctionSimulation:
         holders: Counter = Counter(a.tasks[j].key for a in alive for j in a.bundle)
         conflicts = sum(1 for c in holders.values() if c > 1)
         views = [a.winners() for a in alive]
-        all_keys = sorted(set().union(*views)) if views else []
+        # every task any robot ever knew, so that tasks of a team that died out are not forgotten
+        tasks_by_key = {t.key: t for a in self.agents.values() for t in a.tasks}
+        all_keys = sorted(tasks_by_key)
         disagreements = sum(1 for k in all_keys if len({v.get(k) for v in views}) > 1)
         done = {k for v in views for k, w in v.items() if w == DONE}
-        tasks_by_key = {t.key: t for a in alive for t in a.tasks}
-        unassigned, infeasible = [], []
+        known_alive = {t.key for a in alive for t in a.tasks}
+        # infeasible: no live robot has what the task needs; lost: only failed robots ever knew it
+        unassigned, infeasible, lost = [], [], []
         for key in all_keys:
             if key in done or key in holders:
                 continue
-            if any(a.robot.can_do(tasks_by_key[key].requires) for a in alive):
+            if key not in known_alive:
+                lost.append(key)
+            elif any(a.robot.can_do(tasks_by_key[key].requires) for a in alive):
                 unassigned.append(key)
             else:
                 infeasible.append(key)
@@ -259,6 +265,7 @@ class AuctionSimulation:
             disagreements=disagreements,
             unassigned=unassigned,
             infeasible=infeasible,
+            lost=lost,
             paths={a.index: a.path_keys() for a in alive},
             lengths={a.index: a.path_length() for a in alive},
             names=dict(self.names),

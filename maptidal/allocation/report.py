@@ -55,6 +55,7 @@ def summarise(simulation: AuctionSimulation, report: AuctionReport, task_names: 
         "converged": report.converged,
         "disagreements": report.disagreements,
         "infeasible": [name(k) for k in report.infeasible],
+        "lost": [name(k) for k in report.lost],
         "failed": [report.names[i] for i in report.names if i not in report.alive and i in simulation.agents],
         "bytes_per_message": round(report.bytes / messages, 1),
         "max_message_bytes": report.max_message_bytes,
