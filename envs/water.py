@@ -93,10 +93,6 @@ class WaterModel:
         self._veil = [float(255.0 * v) for v in veil]
         self._vignette: dict[tuple[int, int], np.ndarray] = {}
 
-    def transmission(self, range_m: np.ndarray) -> np.ndarray:
-        """exp(-beta d) per channel, ``(..., 3)``, for ranges in metres."""
-        return np.exp(-np.asarray(range_m, dtype=np.float64)[..., None] * np.asarray(self._beta))
-
     def _vignette_mask(self, height: int, width: int) -> np.ndarray:
         key = (height, width)
         if key not in self._vignette:

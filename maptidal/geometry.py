@@ -92,6 +92,21 @@ def _view_frames(viewpoints: np.ndarray) -> np.ndarray:
     return np.stack([viewpoints[:, 3:6], right, up], axis=1)
 
 
+def _batch_local(
+    viewpoints: np.ndarray, frames: np.ndarray, columns: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Camera-frame (depth, x, y), each ``(B, M)``, of M points ``(3, M)`` seen from B viewpoints."""
+    offsets = [columns[k][None, :] - viewpoints[:, k, None] for k in range(3)]
+    # frame row j . offset: depth (j = 0), then the right and up offsets
+    depth, x, y = (
+        frames[:, j, 0, None] * offsets[0]
+        + frames[:, j, 1, None] * offsets[1]
+        + frames[:, j, 2, None] * offsets[2]
+        for j in range(3)
+    )
+    return depth, x, y
+
+
 def _inside_local(depth: np.ndarray, x: np.ndarray, y: np.ndarray, camera: CameraModel) -> np.ndarray:
     """Half-space test on camera-frame offsets: depth along the view, x right, y up."""
     inside = depth <= camera.range_m
@@ -243,14 +258,7 @@ def count_in_frustums(
         chunk = max(1, max_pairs // columns.shape[1])
         for start in range(0, len(members), chunk):
             batch = members[start : start + chunk]
-            offsets = [columns[k][None, :] - viewpoints[batch, k, None] for k in range(3)]
-            # Frame row j . offset: depth (j = 0), then the right and up offsets.
-            depth, x, y = (
-                frames[batch, j, 0, None] * offsets[0]
-                + frames[batch, j, 1, None] * offsets[1]
-                + frames[batch, j, 2, None] * offsets[2]
-                for j in range(3)
-            )
+            depth, x, y = _batch_local(viewpoints[batch], frames[batch], columns)
             counts[batch] = np.count_nonzero(_inside_local(depth, x, y, camera), axis=1)
     return counts
 
@@ -288,13 +296,7 @@ def frustum_count_bounds(
     chunk = max(1, max_pairs // len(centres))
     for start in range(0, len(viewpoints), chunk):
         batch = slice(start, start + chunk)
-        offsets = [columns[k][None, :] - viewpoints[batch, k, None] for k in range(3)]
-        depth, x, y = (
-            frames[batch, j, 0, None] * offsets[0]
-            + frames[batch, j, 1, None] * offsets[1]
-            + frames[batch, j, 2, None] * offsets[2]
-            for j in range(3)
-        )
+        depth, x, y = _batch_local(viewpoints[batch], frames[batch], columns)
         # signed distance of each cell centre to the nearest frustum face (positive inside)
         distance = np.minimum(depth, camera.range_m - depth)
         np.minimum(distance, (depth * camera.tan_half_h - np.abs(x)) * side_h, out=distance)

@@ -123,16 +123,22 @@ def test_native_and_numpy_callbacks_give_the_same_forces():
     rng = np.random.default_rng(3)
     for _ in range(5):
         sim.data.qvel[:] = rng.normal(0, 0.5, 6)
-        quat = rng.normal(size=4)
-        sim.data.qpos[3:7] = quat / np.linalg.norm(quat)
-        sim.data.act[:] = rng.uniform(-1, 1, 8)
-        forces = {}
-        for backend in ("numpy", "native"):
-            assert hydrodynamics.install_callback(prefer_native=backend == "native") == backend
-            mujoco.mj_forward(sim.model, sim.data)
-            forces[backend] = sim.data.qfrc_passive.copy()
+        forces = _forces_from_both_backends(sim, rng)
         assert np.abs(forces["native"]).max() > 1.0
         np.testing.assert_allclose(forces["native"], forces["numpy"], rtol=1e-9, atol=1e-9)
+
+
+def _forces_from_both_backends(sim: Simulation, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """Random attitude and thruster states, then the passive forces of the numpy and C callbacks."""
+    quat = rng.normal(size=4)
+    sim.data.qpos[3:7] = quat / np.linalg.norm(quat)
+    sim.data.act[:] = rng.uniform(-1, 1, 8)
+    forces = {}
+    for backend in ("numpy", "native"):
+        assert hydrodynamics.install_callback(prefer_native=backend == "native") == backend
+        mujoco.mj_forward(sim.model, sim.data)
+        forces[backend] = sim.data.qfrc_passive.copy()
+    return forces
 
 
 def test_hydrodynamics_off_leaves_a_bare_rigid_body():
@@ -189,12 +195,5 @@ def test_native_and_numpy_agree_for_thrusters_at_the_surface():
     rng = np.random.default_rng(8)
     for _ in range(5):
         sim.data.qpos[2] = 30.0 + rng.uniform(-0.2, 0.2)
-        quat = rng.normal(size=4)
-        sim.data.qpos[3:7] = quat / np.linalg.norm(quat)
-        sim.data.act[:] = rng.uniform(-1, 1, 8)
-        forces = {}
-        for backend in ("numpy", "native"):
-            assert hydrodynamics.install_callback(prefer_native=backend == "native") == backend
-            mujoco.mj_forward(sim.model, sim.data)
-            forces[backend] = sim.data.qfrc_passive.copy()
+        forces = _forces_from_both_backends(sim, rng)
         np.testing.assert_allclose(forces["native"], forces["numpy"], rtol=1e-9, atol=1e-9)

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from maptidal.allocation.consensus import RESET, UPDATE, resolve
+from maptidal.allocation.consensus import RESET, UPDATE, outbids, resolve
 from maptidal.allocation.messages import (
     DONE,
     NEVER,
@@ -112,6 +112,7 @@ class CBBAAgent:
         self.stats = AgentStats()
         self.tasks: list[Task] = []
         self._slot_of: dict[int, int] = {}
+        self._keys = np.zeros(0, dtype=np.int64)  # task keys in slot order
         self._sorted_keys = np.zeros(0, dtype=np.int64)
         self._sort_order = np.zeros(0, dtype=np.int64)
         self.y = np.zeros(0)
@@ -150,7 +151,7 @@ class CBBAAgent:
     @property
     def keys(self) -> np.ndarray:
         """Keys of the known tasks, in local slot order."""
-        return self._sorted_keys[np.argsort(self._sort_order)]
+        return self._keys
 
     def add_tasks(
         self, tasks: list[Task], from_robot: int | None = None, known_to: tuple[int, ...] = ()
@@ -189,9 +190,9 @@ class CBBAAgent:
         for peer in (*known_to, *(() if from_robot is None else (from_robot,))):
             if peer != self.index:
                 self._peer_task_array(peer)[start:] = True
-        keys = np.array([t.key for t in self.tasks], dtype=np.int64)
-        self._sort_order = np.argsort(keys, kind="stable")
-        self._sorted_keys = keys[self._sort_order]
+        self._keys = np.array([t.key for t in self.tasks], dtype=np.int64)
+        self._sort_order = np.argsort(self._keys, kind="stable")
+        self._sorted_keys = self._keys[self._sort_order]
         self._geometry = None
         return n_new
 
@@ -293,10 +294,10 @@ class CBBAAgent:
             in_bundle = np.zeros(self.n_tasks, dtype=bool)
             in_bundle[self.bundle] = True
         holder = np.where(self.z >= 0, self.z, np.iinfo(np.int64).max)
-        beats = (bid > self.y) | ((bid == self.y) & (self.index < holder))
+        beats = outbids(bid, self.index, self.y, holder)
         return self._feasible & ~in_bundle & (self.z != DONE) & (raw > 0) & (bid > 0) & beats
 
-    def _recheck_bundle(self, keys: np.ndarray) -> bool:
+    def _recheck_bundle(self) -> bool:
         """Replay the bundle's construction against the current bids; release from the first entry that
         is no longer this robot's best choice. Returns True when it released something.
 
@@ -317,7 +318,7 @@ class CBBAAgent:
                 self._geometry, path, bids, self.robot.cost_per_m, self.auction.task_value
             )
             candidates = np.flatnonzero(((self._biddable(raw, bid, in_prefix)) | own) & ~in_prefix)
-            if best_candidate(candidates, keys, raw, bid) != held:
+            if best_candidate(candidates, self._keys, raw, bid) != held:
                 released = self.bundle[n:]
                 self._set(np.array(released), NO_WINNER, 0.0)
                 self._drop_from_bundle(set(released))
@@ -334,19 +335,18 @@ class CBBAAgent:
         if not self.alive or not self.n_tasks:
             return False
         limit = self.auction.bundle_limit or math.inf
-        keys = np.array([t.key for t in self.tasks], dtype=np.int64)
         if self._geometry is None:
             self._geometry = PathGeometry(self.robot.position, task_positions(self.tasks))
         changed = False
         if self._bids_lowered:
-            changed = self._recheck_bundle(keys)
+            changed = self._recheck_bundle()
             self._bids_lowered = False
         while len(self.bundle) < limit:
             raw, bid, position = self._bids()
             candidates = np.flatnonzero(self._biddable(raw, bid))
             if not len(candidates):
                 break
-            best = best_candidate(candidates, keys, raw, bid)
+            best = best_candidate(candidates, self._keys, raw, bid)
             self.path.insert(int(position[best]), int(best))
             self.bundle.append(int(best))
             self.bundle_bids.append(float(bid[best]))
@@ -528,7 +528,7 @@ class CBBAAgent:
             clocks_ms=self.clocks[:n_clocks].copy(),
             acks=acks,
             tasks=[self.tasks[s] for s in record_slots],
-            keys=np.array([self.tasks[s].key for s in entry_slots], dtype=np.int64),
+            keys=self._keys[entry_slots],
             winners=self.z[entry_slots],
             bids=self.y[entry_slots],
         )

@@ -64,6 +64,7 @@ class AuctionReport:
     unassigned: list[int]
     infeasible: list[int]
     lost: list[int]
+    done: list[int]
     paths: dict[int, list[int]]
     lengths: dict[int, float]
     names: dict[int, str]
@@ -266,6 +267,7 @@ class AuctionSimulation:
             unassigned=unassigned,
             infeasible=infeasible,
             lost=lost,
+            done=sorted(done),
             paths={a.index: a.path_keys() for a in alive},
             lengths={a.index: a.path_length() for a in alive},
             names=dict(self.names),

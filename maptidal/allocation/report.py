@@ -8,18 +8,13 @@ import numpy as np
 
 from maptidal.allocation.auction import AuctionReport, AuctionSimulation
 from maptidal.allocation.greedy import sequential_greedy
-from maptidal.allocation.messages import DONE
 
 
 def _live_tasks(simulation: AuctionSimulation, report: AuctionReport):
-    tasks = {}
-    for index in report.alive:
-        agent = simulation.agents[index]
-        for slot, task in enumerate(agent.tasks):
-            if agent.z[slot] != DONE:
-                tasks.setdefault(task.key, task)
-    done = {k for i in report.alive for k, w in simulation.agents[i].winners().items() if w == DONE}
-    return [t for k, t in sorted(tasks.items()) if k not in done]
+    """Tasks the live robots know that are not done, in key order."""
+    done = set(report.done)
+    tasks = {t.key: t for i in report.alive for t in simulation.agents[i].tasks if t.key not in done}
+    return [tasks[k] for k in sorted(tasks)]
 
 
 def summarise(simulation: AuctionSimulation, report: AuctionReport, task_names: dict[int, str]) -> dict:
@@ -61,7 +56,7 @@ def summarise(simulation: AuctionSimulation, report: AuctionReport, task_names: 
         "max_message_bytes": report.max_message_bytes,
         "end_time_s": round(report.end_time_s, 3),
         "rejected_messages": dict(report.rejected),
-        "channel": {k: v for k, v in report.channel.items() if k != "by_sender"},
+        "channel": report.channel,
         "greedy_paths": {report.names[i]: [name(k) for k in greedy.paths[i]] for i in report.alive},
     }
 
@@ -82,7 +77,7 @@ def plot_allocation(
     figure, axes = plt.subplots(1, 2, figsize=(13, 5.5), gridspec_kw={"width_ratios": [3, 2]})
     colours = plt.get_cmap("tab10")
     tasks = {t.key: t for a in simulation.agents.values() for t in a.tasks}
-    done = {k for i in report.alive for k, w in simulation.agents[i].winners().items() if w == DONE}
+    done = set(report.done)
     held = {k for path in report.paths.values() for k in path}
     unheld = np.array([t.position for k, t in tasks.items() if k not in held | done]).reshape(-1, 3)
     finished = np.array([tasks[k].position for k in done]).reshape(-1, 3)

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from maptidal.allocation.agent import AgentParams
@@ -55,7 +55,6 @@ class AllocationScenario:
     timing: AgentParams
     events: list[AuctionEvent] = field(default_factory=list)
     task_names: dict[int, str] = field(default_factory=dict)
-    robot_names: dict[int, str] = field(default_factory=dict)
     max_time_s: float = 7200.0
 
     def simulation(self) -> AuctionSimulation:
@@ -89,14 +88,37 @@ def _robot(entry, index: int, where: str) -> RobotProfile:
         raise AllocationScenarioError(f"{where}: {err}") from None
 
 
-def _channel(table) -> ChannelParams:
+def _channel(table, index_of: dict[str, int]) -> ChannelParams:
+    """ChannelParams from the scenario's channel object (outages name robots by id)."""
     _req(isinstance(table, dict), "channel must be an object")
-    allowed = {
-        "bandwidth_bps", "loss", "range_m", "latency_s", "seed", "jitter_s", "max_frame_bytes", "slot_s",
-        "mean_up_s", "mean_down_s", "random_outages_until_s", "outages", "sound_speed_mps", "guard_s",
-    }  # fmt: skip
-    check_keys(table, allowed, "channel", AllocationScenarioError)
-    return table  # type: ignore[return-value]  # finished in scenario_from_dict, which knows robot names
+    check_keys(table, {f.name for f in fields(ChannelParams)}, "channel", AllocationScenarioError)
+    values = dict(table)
+    outages = []
+    for k, outage in enumerate(values.pop("outages", [])):
+        where = f"channel.outages[{k}]"
+        _req(isinstance(outage, dict), f"{where} must be an object")
+        check_keys(outage, {"start_s", "end_s", "robots"}, where, AllocationScenarioError)
+        pair = outage.get("robots")
+        if pair is not None:
+            _req(
+                isinstance(pair, list) and len(pair) == 2 and all(p in index_of for p in pair),
+                f"{where}.robots must name two robots",
+            )
+            pair = (index_of[pair[0]], index_of[pair[1]])
+        start = finite_number(outage.get("start_s"), f"{where}.start_s", 0.0, AllocationScenarioError)
+        end = finite_number(outage.get("end_s"), f"{where}.end_s", start, AllocationScenarioError)
+        outages.append(Outage(start, end, pair))
+    if values.get("random_outages_until_s", 0) is None:
+        values["random_outages_until_s"] = math.inf
+    for key, value in values.items():
+        _req(
+            value is None or (isinstance(value, int | float) and not isinstance(value, bool)),
+            f"channel.{key} must be a number",
+        )
+    try:
+        return ChannelParams(**values, outages=tuple(outages))
+    except (TypeError, ValueError) as err:
+        raise AllocationScenarioError(str(err)) from None
 
 
 def scenario_from_dict(document) -> AllocationScenario:
@@ -180,31 +202,8 @@ def scenario_from_dict(document) -> AllocationScenario:
             _req(entry.get("task") in key_of, f"{where}.task names no task: {entry.get('task')!r}")
             events.append(AuctionEvent(time_s, "done", robot=robot, task_key=key_of[entry["task"]]))
 
-    channel_doc = dict(_channel(document.get("channel", {})))
-    outages = []
-    for k, outage in enumerate(channel_doc.pop("outages", [])):
-        where = f"channel.outages[{k}]"
-        _req(isinstance(outage, dict), f"{where} must be an object")
-        check_keys(outage, {"start_s", "end_s", "robots"}, where, AllocationScenarioError)
-        pair = outage.get("robots")
-        if pair is not None:
-            _req(
-                isinstance(pair, list) and len(pair) == 2 and all(p in index_of for p in pair),
-                f"{where}.robots must name two robots",
-            )
-            pair = (index_of[pair[0]], index_of[pair[1]])
-        start = finite_number(outage.get("start_s"), f"{where}.start_s", 0.0, AllocationScenarioError)
-        end = finite_number(outage.get("end_s"), f"{where}.end_s", start, AllocationScenarioError)
-        outages.append(Outage(start, end, pair))
-    if channel_doc.get("random_outages_until_s", 0) is None:
-        channel_doc["random_outages_until_s"] = math.inf
-    for key, value in channel_doc.items():
-        _req(
-            value is None or (isinstance(value, int | float) and not isinstance(value, bool)),
-            f"channel.{key} must be a number",
-        )
+    channel = _channel(document.get("channel", {}), index_of)
     try:
-        channel = ChannelParams(**channel_doc, outages=tuple(outages))
         auction = AuctionParams(
             task_value=document.get("task_value", AuctionParams.task_value),
             bundle_limit=document.get("bundle_limit", 0),
@@ -222,7 +221,6 @@ def scenario_from_dict(document) -> AllocationScenario:
         timing=timing,
         events=events,
         task_names=task_names,
-        robot_names={r.index: r.name for r in (*robots, *joined)},
         max_time_s=max_time,
     )
 

@@ -12,7 +12,7 @@ Defaults follow what acoustic modems offer: 100 to 1000 bit/s (issue #5; e.g. th
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -126,7 +126,6 @@ class ChannelStats:
     out_of_range: int = 0
     link_down: int = 0
     half_duplex: int = 0
-    by_sender: dict = field(default_factory=dict)
 
 
 class AcousticChannel:
@@ -171,7 +170,6 @@ class AcousticChannel:
         p = self.params
         self.stats.transmissions += 1
         self.stats.bytes += len(data)
-        self.stats.by_sender[sender] = self.stats.by_sender.get(sender, 0) + len(data)
         duration = p.transmit_time(len(data))
         deliveries = []
         for receiver in sorted(positions):
