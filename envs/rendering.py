@@ -2,8 +2,10 @@
 
 ``MUJOCO_GL`` must be set before mujoco is imported; maptidal defaults it to
 ``egl``, which renders through Mesa on a CPU-only machine and on NVIDIA GPUs.
-Each camera is drawn once (``mjr_render``) and its colour and depth buffers are both read
-back from that pass (``mjr_readPixels``), so the water model costs no extra render pass.
+Each camera is drawn once (``mjr_render``). Then either its colour and depth buffers are read
+back from that pass (``mjr_readPixels``) for the CPU water model, or the water model runs as a
+shader on the same buffers (:func:`render_camera_underwater`, :mod:`envs.gl_water`) and only the
+finished image is read back. Neither costs an extra render pass.
 """
 
 from __future__ import annotations
@@ -19,7 +21,18 @@ import cv2
 import mujoco
 import numpy as np
 
+from envs.gl_water import (
+    CameraGeometry,
+    GLWaterPass,
+    is_software_renderer,
+    make_gl_water_pass,
+    renderer_description,
+)
+from envs.water import WaterParams
+
 _renderers: dict[int, mujoco.Renderer] = {}
+# the GL water pass of each renderer (None where shaders are unavailable), keyed by id(renderer)
+_water_passes: dict[int, GLWaterPass | None] = {}
 _cleanup_registered = False
 
 
@@ -29,7 +42,7 @@ def shared_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Re
     renderer = _renderers.get(key)
     if renderer is None or renderer.height != height or renderer.width != width:
         if renderer is not None:
-            renderer.close()
+            _close(renderer)
         renderer = mujoco.Renderer(model, height=height, width=width)
         _renderers[key] = renderer
         global _cleanup_registered
@@ -44,13 +57,34 @@ def release(model: mujoco.MjModel) -> None:
     """Free the renderer of ``model`` (its GL context), if any."""
     renderer = _renderers.pop(id(model), None)
     if renderer is not None:
-        renderer.close()
+        _close(renderer)
+
+
+def _close(renderer: mujoco.Renderer) -> None:
+    water_pass = _water_passes.pop(id(renderer), None)
+    if water_pass is not None:
+        with contextlib.suppress(Exception):
+            water_pass.close()
+    renderer.close()
 
 
 def _release_all() -> None:
     for key in list(_renderers):
         with contextlib.suppress(Exception):
-            _renderers.pop(key).close()
+            _close(_renderers.pop(key))
+
+
+def _draw(
+    model: mujoco.MjModel, data: mujoco.MjData, camera: str, height: int, width: int
+) -> mujoco.Renderer:
+    """Draw ``camera`` into the shared renderer's off-screen buffer; returns that renderer."""
+    renderer = shared_renderer(model, height, width)
+    renderer.update_scene(data, camera=camera)
+    ctx = renderer._mjr_context  # the Renderer's own context: reuse it rather than make another
+    renderer._gl_context.make_current()
+    mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, ctx)
+    mujoco.mjr_render(mujoco.MjrRect(0, 0, width, height), renderer.scene, ctx)
+    return renderer
 
 
 def render_camera(
@@ -67,13 +101,9 @@ def render_camera(
     With ``with_depth=False`` the depth buffer is not read back and None is returned for it. With
     ``raw_depth=True`` the depth comes back as OpenGL left it: the reversed-Z buffer, rows bottom-up
     (see :func:`depth_coefficients` to convert it in one step with other per-pixel factors)."""
-    renderer = shared_renderer(model, height, width)
-    renderer.update_scene(data, camera=camera)
+    renderer = _draw(model, data, camera, height, width)
     rect = mujoco.MjrRect(0, 0, width, height)
-    ctx = renderer._mjr_context  # the Renderer's own context: reuse it rather than make another
-    renderer._gl_context.make_current()
-    mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, ctx)
-    mujoco.mjr_render(rect, renderer.scene, ctx)
+    ctx = renderer._mjr_context
     rgb = np.empty((height, width, 3), np.uint8)
     mujoco.mjr_readPixels(rgb, None, rect, ctx)
     rgb = cv2.flip(rgb, 0)  # OpenGL rows run bottom-up
@@ -83,6 +113,53 @@ def render_camera(
     depth = np.empty((height, width), np.float32)
     mujoco.mjr_readPixels(None, depth, rect, ctx)
     return rgb, depth if raw_depth else buffer_to_depth(cv2.flip(depth, 0), model)
+
+
+def gl_water_available(model: mujoco.MjModel, height: int, width: int, geometry: CameraGeometry) -> bool:
+    """Whether the water model can run as a shader in this process's renderer for ``model``."""
+    return _water_pass(shared_renderer(model, height, width), geometry) is not None
+
+
+def describe_renderer(model: mujoco.MjModel, height: int, width: int) -> str:
+    """GL_RENDERER and GL_VERSION of this process's renderer for ``model`` (for logs and benches)."""
+    return renderer_description(shared_renderer(model, height, width))
+
+
+def renders_on_gpu(model: mujoco.MjModel, height: int, width: int) -> bool:
+    """Whether this process's renderer for ``model`` draws on a GPU rather than a CPU rasteriser."""
+    return not is_software_renderer(shared_renderer(model, height, width))
+
+
+def _water_pass(renderer: mujoco.Renderer, geometry: CameraGeometry) -> GLWaterPass | None:
+    key = id(renderer)
+    if key not in _water_passes:
+        _water_passes[key] = make_gl_water_pass(renderer, geometry)
+    water_pass = _water_passes[key]
+    if water_pass is not None and water_pass.geometry != geometry:
+        water_pass.geometry = geometry
+        water_pass.invalidate()
+    return water_pass
+
+
+def render_camera_underwater(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    camera: str,
+    geometry: CameraGeometry,
+    water: WaterParams,
+    height: int,
+    width: int,
+    seed: int = 0,
+    with_depth: bool = False,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Like :func:`render_camera` with ``raw_depth=True``, but the water model runs on the GL side
+    (:mod:`envs.gl_water`) and the returned RGB is already the underwater image. Call
+    :func:`gl_water_available` first: this raises RuntimeError where the shader cannot run."""
+    renderer = _draw(model, data, camera, height, width)
+    water_pass = _water_pass(renderer, geometry)
+    if water_pass is None:
+        raise RuntimeError("the GL water pass is unavailable in this GL context")
+    return water_pass.apply(water, seed=seed, with_depth=with_depth)
 
 
 def depth_coefficients(model: mujoco.MjModel) -> tuple[float, float]:

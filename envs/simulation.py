@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import math
 import time
+import weakref
 from collections.abc import Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,12 +32,30 @@ import numpy as np
 from controllers.convention import pilot_command
 from controllers.mixing import MixerParams, mix
 from envs import hydrodynamics
-from envs.rendering import depth_coefficients, render_camera
+from envs.gl_water import CameraGeometry
+from envs.rendering import (
+    depth_coefficients,
+    gl_water_available,
+    release,
+    render_camera,
+    render_camera_underwater,
+    renders_on_gpu,
+)
 from envs.scenario import Scenario, load_scenario
 from envs.sensors import RobotSensors
 from envs.water import WaterModel, depth_to_range
 from envs.world import RobotPlacement, camera_offsets, compose
 from maptidal.keyframes import StereoCameraParams
+
+WATER_BACKENDS = ("auto", "gl", "cpu")
+_workers: list[ThreadPoolExecutor] = []
+
+
+def _water_worker() -> ThreadPoolExecutor:
+    """The one thread that runs the CPU water model beside rendering (made on first use)."""
+    if not _workers:
+        _workers.append(ThreadPoolExecutor(1, thread_name_prefix="maptidal-water"))
+    return _workers[0]
 
 
 class SimulationError(RuntimeError):
@@ -60,6 +80,7 @@ class Simulation:
         scenario: Scenario | str | Path | None = None,
         camera: StereoCameraParams | None = None,
         hydrodynamics_backend: str = "native",
+        water_backend: str = "auto",
     ) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         self.camera = camera or StereoCameraParams()
@@ -95,12 +116,32 @@ class Simulation:
                 self.scenario.tank.height,
             )
             self._mixers[robot.name] = MixerParams(frame=robot.vehicle.ardusub_frame)
+        if water_backend not in WATER_BACKENDS:
+            raise ValueError(f"water_backend must be one of {WATER_BACKENDS}, got {water_backend!r}")
         self.water = WaterModel(self.scenario.water)
+        self._water_backend = water_backend
         self._ray_scale: np.ndarray | None = None
         self._depth_shift, self._depth_scale = (float(v) for v in depth_coefficients(self.model))
+        cam = self.camera
+        self._geometry = CameraGeometry(
+            cam.fx, cam.fy, cam.width / 2, cam.height / 2, self._depth_shift, self._depth_scale
+        )
         self.rng = np.random.default_rng()
         self.wall_time_s = 0.0
+        # the process-wide renderer of this model (and its GL context) goes when the simulation does
+        self._release_renderer = weakref.finalize(self, release, self.model)
+        self._release_renderer.atexit = False  # at exit, envs.rendering frees every renderer itself
         self.reset()
+
+    def close(self) -> None:
+        """Free this simulation's renderer and GL context now (also done when it is garbage collected)."""
+        self._release_renderer()
+
+    def __enter__(self) -> Simulation:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
 
     # ----- state ------------------------------------------------------------------------
     @property
@@ -222,32 +263,72 @@ class Simulation:
         """The robot's stereo pair as uint8 RGB images ``(H, W, 3)``: ``(left, right)``.
 
         With ``depth=True`` returns ``(left, right, left_depth, right_depth)``, the
-        planar depth in metres. ``water`` applies the underwater image model.
+        planar depth in metres. ``water`` applies the underwater image model, on the GL side
+        where it can (see :attr:`water_backend`).
         """
         spec = self._specs[self._check(robot)]
         if "stereo" not in spec.sensors:
             raise ValueError(f"{robot} has no stereo camera in this scenario")
         cam = self.camera
-        images, depths = [], []
+        on_gl = water and self.water.params.enabled and self.water_backend == "gl"
+        images: list = []  # arrays, or futures of the CPU water model's results
+        depths = []
         for side in ("left", "right"):
-            rgb, buffer = render_camera(
-                self.model,
-                self.data,
-                f"{robot}/{side}",
-                cam.height,
-                cam.width,
-                with_depth=water or depth,
-                raw_depth=True,
-            )
+            if on_gl:
+                noisy = self.water.params.noise_sigma > 0
+                rgb, buffer = render_camera_underwater(
+                    self.model,
+                    self.data,
+                    f"{robot}/{side}",
+                    self._geometry,
+                    self.water.params,
+                    cam.height,
+                    cam.width,
+                    seed=int(self.rng.integers(1 << 32)) if noisy else 0,
+                    with_depth=depth,
+                )
+            else:
+                rgb, buffer = render_camera(
+                    self.model,
+                    self.data,
+                    f"{robot}/{side}",
+                    cam.height,
+                    cam.width,
+                    with_depth=water or depth,
+                    raw_depth=True,
+                )
             if buffer is not None:
                 buffer = cv2.add(cv2.flip(buffer, 0), self._depth_shift)
-            if water:
+            if water and not on_gl:
                 # range along each ray = (ray length per unit depth x d) / (buffer + c), in one division
-                rgb = self.water.apply(rgb, cv2.divide(self._range_numerator(buffer), buffer), self.rng)
+                ranges = cv2.divide(self._range_numerator(buffer), buffer)
+                # the left frame's water model runs on a worker thread while the right camera renders
+                # (OpenCV releases the GIL); each frame's noise generator is drawn here, in order
+                frame_rng = np.random.default_rng(int(self.rng.integers(1 << 63)))
+                rgb = _water_worker().submit(self.water.apply, rgb, ranges, frame_rng)
             images.append(rgb)
             if depth:
                 depths.append(cv2.divide(self._depth_scale, buffer))
+        images = [image.result() if isinstance(image, Future) else image for image in images]
         return (*images, *depths) if depth else tuple(images)
+
+    @property
+    def water_backend(self) -> str:
+        """Where the water model runs: ``"gl"`` (a shader in the renderer's context) or ``"cpu"``
+        (:class:`envs.water.WaterModel`). ``"gl"`` at construction raises RuntimeError where the
+        shader cannot run. ``"auto"`` picks GL on a GPU and the CPU model on a CPU rasteriser
+        (Mesa llvmpipe), where the shader is no faster (README, rendering bench)."""
+        if self._water_backend in ("auto", "gl"):
+            height, width = self.camera.height, self.camera.width
+            if self._water_backend == "auto" and not renders_on_gpu(self.model, height, width):
+                self._water_backend = "cpu"
+            elif gl_water_available(self.model, height, width, self._geometry):
+                self._water_backend = "gl"
+            elif self._water_backend == "gl":
+                raise RuntimeError("water_backend='gl' asked for, but the water shader cannot run here")
+            else:
+                self._water_backend = "cpu"
+        return self._water_backend
 
     def _range_numerator(self, like: np.ndarray) -> np.ndarray:
         if self._ray_scale is None:

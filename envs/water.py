@@ -67,14 +67,22 @@ class WaterParams:
         return beta, veil
 
 
+def visibility_limit_m(beta: np.ndarray) -> float:
+    """Range (m) beyond which every channel is attenuated below exp(-60): nothing is visible there,
+    and clamping to it keeps float32 arithmetic out of slow denormals."""
+    return 60.0 / max(float(np.min(beta)), 1e-6)
+
+
 _NOISE_BANK_SIZE = 1 << 22  # standard normal draws shared by every camera (16 MB, made once)
 _bank: list[np.ndarray] = []
 
 
 def _noise_bank() -> np.ndarray:
     """A fixed bank of standard normal draws. Each frame reads a window at a random offset (drawn from
-    the simulation's seeded generator), which costs a slice instead of 768k fresh draws per frame; the
-    window moves by up to four million draws, so consecutive frames do not repeat each other's noise."""
+    the simulation's seeded generator), which costs a slice instead of 768k fresh draws per frame.
+    Windows of two frames may overlap, so one frame's noise can reappear in another shifted by the
+    offsets' difference, but at the same pixels only if the offsets coincide (1 in 3.4 million).
+    The GL water pass (:mod:`envs.gl_water`) hashes each pixel instead and has no such overlap."""
     if not _bank:
         _bank.append(np.random.default_rng(20260).standard_normal(_NOISE_BANK_SIZE, dtype=np.float32))
     return _bank[0]
@@ -90,6 +98,7 @@ class WaterModel:
         self.params = params or WaterParams()
         beta, veil = self.params.coefficients()
         self._beta = [float(b) for b in beta]
+        self._max_range = visibility_limit_m(beta)
         self._veil = [float(255.0 * v) for v in veil]
         self._vignette: dict[tuple[int, int], np.ndarray] = {}
 
@@ -107,8 +116,7 @@ class WaterModel:
         """The underwater image (uint8 RGB) of a clear-water render and its per-pixel range (m)."""
         if not self.params.enabled:
             return rgb
-        # beyond exp(-60) nothing is visible; stopping there keeps float32 out of slow denormals
-        distance = cv2.min(np.asarray(range_m, dtype=np.float32), 60.0 / max(min(self._beta), 1e-6))
+        distance = cv2.min(np.asarray(range_m, dtype=np.float32), self._max_range)
         planes = cv2.split(np.ascontiguousarray(rgb, dtype=np.uint8))
         transmission = np.empty(distance.shape, np.float32)
         signal = np.empty(distance.shape, np.float32)
@@ -135,6 +143,7 @@ class WaterModel:
                 first = start + channel * distance.size
                 draws = bank[first : first + distance.size].reshape(distance.shape)
                 cv2.scaleAdd(draws, self.params.noise_sigma, signal, dst=signal)
+                cv2.max(signal, 0.0, dst=signal)  # clip, since convertScaleAbs would mirror negatives
             out.append(cv2.convertScaleAbs(signal))
         return cv2.merge(out)
 

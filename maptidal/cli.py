@@ -289,6 +289,13 @@ def _add_sim_parser(commands) -> None:
         metavar="N",
         help="control steps between saved pairs (default %(default)s)",
     )
+    sim.add_argument(
+        "--water-backend",
+        choices=("auto", "gl", "cpu"),
+        default="auto",
+        help="where the underwater image model runs: a GL shader, the CPU, or auto (GL on a GPU, "
+        "CPU on a software rasteriser; default %(default)s)",
+    )
     sim.add_argument("--seed", type=int, default=0, help="noise seed (default %(default)s)")
     sim.add_argument("--json", action="store_true", help="print the result as JSON")
     sim.set_defaults(handler=_cmd_sim)
@@ -308,7 +315,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     if args.frame:
         scenario = with_frame(scenario, args.frame)
-    sim = Simulation(scenario)
+    sim = Simulation(scenario, water_backend=args.water_backend)
     sim.reset(seed=args.seed)
     steps = max(1, round(args.duration / (scenario.substeps * scenario.timestep_s)))
     render_dir = Path(args.render_dir) if args.render_dir else None
@@ -338,6 +345,8 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         "realtime_factor": sim.time / wall if wall > 0 else float("inf"),
         "hydrodynamics": sim.backend,
     }
+    if render_dir:
+        result["water_backend"] = sim.water_backend
     if args.json:
         print(json.dumps(result))
     else:

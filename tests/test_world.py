@@ -1,12 +1,16 @@
 """Scenarios, sensors, rendering (stereo geometry, water model, determinism) and `maptidal sim`."""
 
+import gc
 import json
 import math
+from dataclasses import replace
 
 import cv2
 import numpy as np
 import pytest
 
+from envs import rendering
+from envs.rendering import renders_on_gpu
 from envs.scenario import RobotSpec, Scenario, ScenarioError, load_scenario, scenario_from_dict
 from envs.sensors import SensorNoise, heading_from_field
 from envs.simulation import Simulation
@@ -23,12 +27,27 @@ PLAIN_WALL = TankModel(
 )
 
 
-def facing_wall(distance_m: float, water: WaterParams, **robot) -> Simulation:
-    """A Heavy whose cameras are ``distance_m`` from a plain end wall, looking at it."""
+def facing_wall(distance_m: float, water: WaterParams, backend: str = "auto", **robot) -> Simulation:
+    """A Heavy whose cameras are ``distance_m`` from a plain end wall, looking at it; ``backend`` is
+    where the water model runs (a "gl" that cannot run here skips the test)."""
     vehicle = load_vehicle("heavy")
     x = -distance_m - vehicle.sensors.camera_position[0]
     spec = RobotSpec("rov", vehicle, (x, 0.0, 1.0), **robot)
-    return Simulation(Scenario("wall", PLAIN_WALL, (spec,), water=water, noise=QUIET))
+    return with_backend(Scenario("wall", PLAIN_WALL, (spec,), water=water, noise=QUIET), backend)
+
+
+def with_backend(scenario: Scenario, backend: str) -> Simulation:
+    """A Simulation of ``scenario`` whose water model runs on ``backend``; skips where GL cannot."""
+    sim = Simulation(scenario, water_backend=backend)
+    if backend == "gl":
+        try:
+            assert sim.water_backend == "gl"
+        except RuntimeError as err:
+            pytest.skip(str(err))
+    return sim
+
+
+BACKENDS = ("cpu", "gl")
 
 
 BAD = {
@@ -97,10 +116,11 @@ def _contrast(image: np.ndarray) -> float:
     return float(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)[100:300, 200:440].std())
 
 
-def test_turbidity_lowers_contrast_monotonically_with_range():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_turbidity_lowers_contrast_monotonically_with_range(backend):
     ratios = []
     for distance in (0.6, 1.2, 2.4):
-        sim = facing_wall(distance, WaterParams(turbidity=0.6))
+        sim = facing_wall(distance, WaterParams(turbidity=0.6), backend)
         clear, _ = sim.render_stereo("rov", water=False)
         murky, _ = sim.render_stereo("rov", water=True)
         ratios.append(_contrast(murky) / _contrast(clear))
@@ -128,8 +148,9 @@ def test_water_model_is_the_formula():
     np.testing.assert_allclose(out, expected, atol=1.0)
 
 
-def test_rendering_is_deterministic_for_the_same_state_and_seed():
-    sim = facing_wall(1.0, WaterParams(turbidity=0.3, noise_sigma=3.0, vignetting=0.2))
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_rendering_is_deterministic_for_the_same_state_and_seed(backend):
+    sim = facing_wall(1.0, WaterParams(turbidity=0.3, noise_sigma=3.0, vignetting=0.2), backend)
     sim.reset(seed=5)
     first = sim.render_stereo("rov")
     sim.reset(seed=5)
@@ -137,6 +158,67 @@ def test_rendering_is_deterministic_for_the_same_state_and_seed():
     for a, b in zip(first, second, strict=True):
         np.testing.assert_array_equal(a, b)
     assert not np.array_equal(first[0], first[1])  # the two cameras differ
+    sim.reset(seed=6)
+    assert not np.array_equal(sim.render_stereo("rov")[0], first[0])  # another seed, other noise
+
+
+def _tank_view(water: WaterParams, backend: str) -> Simulation:
+    """The default scenario (walls, window, ladder, ranges from 0.5 m to the far wall) with ``water``."""
+    return with_backend(replace(load_scenario(), water=water, noise=QUIET), backend)
+
+
+@pytest.mark.parametrize(
+    "water",
+    [WaterParams(turbidity=0.0), WaterParams(turbidity=0.6, vignetting=0.3), WaterParams(turbidity=1.0)],
+    ids=["clear", "turbid-vignetted", "murky"],
+)
+def test_gl_water_shader_matches_the_cpu_model(water):
+    cpu, gl = _tank_view(water, "cpu"), _tank_view(water, "gl")
+    robot = cpu.robots[0]
+    pairs = zip(gl.render_stereo(robot, depth=True), cpu.render_stereo(robot, depth=True), strict=True)
+    for ours, reference in pairs:
+        if ours.dtype == np.uint8:
+            difference = np.abs(ours.astype(int) - reference.astype(int))
+            # float rounding (exp, sqrt in the shader) may tip a value to the next level, never further
+            assert difference.max() <= 1 and (difference > 0).mean() < 0.05
+        else:
+            np.testing.assert_array_equal(ours, reference)  # the same depth buffer, converted alike
+    assert gl.water_backend == "gl" and cpu.water_backend == "cpu"
+
+
+def test_gl_water_noise_has_the_requested_spread_and_is_independent_per_camera():
+    sim = _tank_view(WaterParams(turbidity=0.3, noise_sigma=4.0), "gl")
+    robot = sim.robots[0]
+    noisy = sim.render_stereo(robot)
+    sim.water = WaterModel(WaterParams(turbidity=0.3))
+    plain = sim.render_stereo(robot)
+    noise = [a.astype(float) - b for a, b in zip(noisy, plain, strict=True)]
+    for frame in noise:
+        for channel in range(3):
+            assert abs(frame[..., channel].std() - 4.0) < 0.2
+            assert abs(frame[..., channel].mean()) < 0.1
+        # neighbouring pixels and channels draw unrelated noise
+        assert abs(np.corrcoef(frame[:, :-1, 0].ravel(), frame[:, 1:, 0].ravel())[0, 1]) < 0.02
+        assert abs(np.corrcoef(frame[..., 0].ravel(), frame[..., 2].ravel())[0, 1]) < 0.02
+    assert abs(np.corrcoef(noise[0].ravel(), noise[1].ravel())[0, 1]) < 0.02
+
+
+def test_gl_water_pass_leaves_mujoco_rendering_unchanged():
+    sim = _tank_view(WaterParams(turbidity=0.5, noise_sigma=2.0, vignetting=0.2), "gl")
+    robot = sim.robots[0]
+    before = sim.render_stereo(robot, depth=True, water=False)
+    sim.render_stereo(robot)
+    after = sim.render_stereo(robot, depth=True, water=False)
+    for a, b in zip(before, after, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_water_backend_is_checked_and_auto_picks_gl_only_on_a_gpu():
+    with pytest.raises(ValueError, match="water_backend"):
+        Simulation(water_backend="cuda")
+    sim = Simulation()
+    on_gpu = renders_on_gpu(sim.model, sim.camera.height, sim.camera.width)
+    assert sim.water_backend == ("gl" if on_gpu else "cpu")
 
 
 def test_sim_cli_prints_the_final_state(tmp_path, capsys):
@@ -152,6 +234,8 @@ def test_sim_cli_prints_the_final_state(tmp_path, capsys):
             str(tmp_path),
             "--render-every",
             "40",
+            "--water-backend",
+            "cpu",
         ]
     )
     assert code == 0
@@ -160,6 +244,7 @@ def test_sim_cli_prints_the_final_state(tmp_path, capsys):
     assert result["sim_time_s"] == pytest.approx(1.0, abs=0.03)
     assert result["velocity_body"][0] > 0.3
     assert len(list(tmp_path.glob("rov0_*.png"))) == 2
+    assert result["water_backend"] == "cpu"
     with pytest.raises(SystemExit):
         main(["sim", "--help"])
 
@@ -174,3 +259,21 @@ def test_camera_noise_has_the_requested_spread_and_changes_every_frame():
         assert abs(frame.astype(float).std() - 4.0) < 0.2
         assert abs(frame.astype(float).mean() - 128.0) < 0.2
     assert np.corrcoef(first.ravel().astype(float), second.ravel().astype(float))[0, 1] < 0.05
+    # noise that would go below black clips to 0 (P(N(0, 4) < 0.5) = 0.55) rather than mirroring
+    black = model.apply(np.zeros((200, 300, 3), np.uint8), ranges, rng)
+    assert 0.5 < (black == 0).mean() < 0.6
+
+
+def test_a_closed_or_collected_simulation_frees_its_renderer():
+    with Simulation() as sim:
+        sim.render_stereo(sim.robots[0])
+        key = id(sim.model)
+        assert key in rendering._renderers
+    assert key not in rendering._renderers
+    sim.close()  # closing twice is harmless
+    again = Simulation()
+    again.render_stereo(again.robots[0], water=False)
+    key = id(again.model)
+    del again
+    gc.collect()
+    assert key not in rendering._renderers

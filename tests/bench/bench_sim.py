@@ -4,7 +4,7 @@
   passive-force callback and no gravity (robots float in place), and (b) with the
   Fossen hydrodynamics and thrusters on, for 1, 2 and 4 robots. Goal: (b)/(a) >= 0.5.
 - Rendering: 640 x 400 stereo pairs through ``Simulation.render_stereo`` (one
-  render pass per camera, colour and depth read together, water model applied)
+  render pass per camera, water model applied as a GL shader and on the CPU)
   against a bare ``mujoco.Renderer`` rendering the same two cameras. Goal >= 0.8.
 
 Run: ``make bench`` (or ``python tests/bench/bench_sim.py [--pairs N]``). Prints a
@@ -22,11 +22,19 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco
 
 from envs import hydrodynamics
+from envs.rendering import describe_renderer
 from envs.scenario import RobotSpec, Scenario
 from envs.simulation import Simulation
 from envs.vehicle import load_vehicle
 from envs.water import WaterModel, WaterParams
 from maptidal.tank import TankModel
+
+
+def gl_renderer_name() -> str:
+    """GL_RENDERER of this process's EGL context (the GPU, or llvmpipe on a CPU)."""
+    with Simulation(scenario(1)) as sim:
+        sim.render_stereo("rov0", water=False)
+        return describe_renderer(sim.model, sim.camera.height, sim.camera.width)
 
 
 def scenario(n_robots: int) -> Scenario:
@@ -70,12 +78,14 @@ def bench_physics(n_robots: int, steps: int = 20000) -> tuple[float, float]:
 
 
 def bench_render(pairs: int, rounds: int = 10) -> dict[str, float]:
-    """Pairs/s of a bare mujoco.Renderer and of render_stereo with and without the water model.
+    """Pairs/s of a bare mujoco.Renderer and of render_stereo without water, and with the water model
+    on each backend (GL shader, CPU), plain and with noise and vignetting.
 
     The variants take turns in `rounds` blocks and each keeps its best block, so drift in the
     machine's speed hits all of them alike."""
-    sim = Simulation(scenario(1))
     noisy = WaterModel(WaterParams(turbidity=0.3, noise_sigma=2.0, vignetting=0.2))
+    sims = {backend: Simulation(scenario(1), water_backend=backend) for backend in ("cpu", "gl")}
+    sim = sims["cpu"]
     cam = sim.camera
     renderer = mujoco.Renderer(sim.model, cam.height, cam.width)
 
@@ -84,21 +94,23 @@ def bench_render(pairs: int, rounds: int = 10) -> dict[str, float]:
             renderer.update_scene(sim.data, camera=f"rov0/{side}")
             renderer.render()
 
-    def with_noise() -> None:
-        plain = sim.water
-        sim.water = noisy
-        sim.render_stereo("rov0")
-        sim.water = plain
+    def with_noise(backend: str) -> None:
+        chosen = sims[backend]
+        plain = chosen.water
+        chosen.water = noisy
+        chosen.render_stereo("rov0")
+        chosen.water = plain
 
     variants = {
         "bare mujoco.Renderer": bare,
         "render_stereo, no water": lambda: sim.render_stereo("rov0", water=False),
-        "render_stereo + water": lambda: sim.render_stereo("rov0"),
-        "render_stereo + water, noise, vignetting": with_noise,
     }
+    for backend, chosen in sims.items():
+        variants[f"render_stereo + water ({backend})"] = lambda chosen=chosen: chosen.render_stereo("rov0")
+        variants[f"render_stereo + water, noise, vignetting ({backend})"] = lambda b=backend: with_noise(b)
     best = dict.fromkeys(variants, 0.0)
     for job in variants.values():
-        job()  # warm up: creates the shared renderers
+        job()  # warm up: creates the shared renderers and the GL water pass
     block = max(1, pairs // rounds)
     for _ in range(rounds):
         for name, job in variants.items():
@@ -117,7 +129,7 @@ def main() -> None:
     args = parser.parse_args()
     print(
         f"MUJOCO_GL={os.environ['MUJOCO_GL']}, mujoco {mujoco.__version__}, hydrodynamics "
-        f"{hydrodynamics.install_callback()}"
+        f"{hydrodynamics.install_callback()}, GL renderer {gl_renderer_name()}"
     )
     print("\n| robots | bare mj_step steps/s | with hydrodynamics | ratio |\n|---|---|---|---|")
     for n in (1, 2, 4):
