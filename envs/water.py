@@ -22,6 +22,7 @@ water; sensor noise (optional) is drawn independently per camera, as on real sen
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -91,8 +92,8 @@ def _noise_bank() -> np.ndarray:
 class WaterModel:
     """Applies :class:`WaterParams` to frames.
 
-    The formula is evaluated exactly, per colour plane with OpenCV (about 2 ms for a 640 x 400 frame on
-    one core, against about 23 ms for the same arithmetic in numpy with a transmission lookup table)."""
+    The formula is evaluated exactly, per colour plane with OpenCV, on two threads (about 1.1 ms for a
+    640 x 400 frame on a 2-core CPU; 2 ms on one thread, 23 ms for the same arithmetic in numpy)."""
 
     def __init__(self, params: WaterParams | None = None) -> None:
         self.params = params or WaterParams()
@@ -113,39 +114,74 @@ class WaterModel:
     def apply(
         self, rgb: np.ndarray, range_m: np.ndarray, rng: np.random.Generator | None = None
     ) -> np.ndarray:
-        """The underwater image (uint8 RGB) of a clear-water render and its per-pixel range (m)."""
+        """The underwater image (uint8 RGB) of a clear-water render and its per-pixel range (m).
+
+        The upper and lower halves of the frame are computed on two threads (OpenCV releases the GIL);
+        the result does not depend on the split."""
         if not self.params.enabled:
             return rgb
+        rgb = np.ascontiguousarray(rgb, dtype=np.uint8)
         distance = cv2.min(np.asarray(range_m, dtype=np.float32), self._max_range)
-        planes = cv2.split(np.ascontiguousarray(rgb, dtype=np.uint8))
-        transmission = np.empty(distance.shape, np.float32)
-        signal = np.empty(distance.shape, np.float32)
         vignette = self._vignette_mask(*distance.shape) if self.params.vignetting > 0 else None
-        noise = self.params.noise_sigma > 0
-        if noise:
+        noise = None
+        if self.params.noise_sigma > 0:
             rng = rng or np.random.default_rng()
             bank = _noise_bank()
             start = int(rng.integers(0, len(bank) - 3 * distance.size))
-        out = []
-        for channel, plane in enumerate(planes):
+            noise = bank[start : start + 3 * distance.size].reshape(3, *distance.shape)
+        out = np.empty_like(rgb)
+        height = distance.shape[0]
+        if height < _SPLIT_MIN_ROWS:
+            self._apply_rows(rgb, distance, vignette, noise, out, slice(0, height))
+            return out
+        middle = height // 2
+        upper = _helper().submit(self._apply_rows, rgb, distance, vignette, noise, out, slice(0, middle))
+        self._apply_rows(rgb, distance, vignette, noise, out, slice(middle, height))
+        upper.result()
+        return out
+
+    def _apply_rows(
+        self,
+        rgb: np.ndarray,
+        distance: np.ndarray,
+        vignette: np.ndarray | None,
+        noise: np.ndarray | None,
+        out: np.ndarray,
+        rows: slice,
+    ) -> None:
+        """Write rows ``rows`` of the underwater image into ``out``."""
+        distance = distance[rows]
+        transmission = np.empty(distance.shape, np.float32)
+        signal = np.empty(distance.shape, np.float32)
+        planes = []
+        for channel, plane in enumerate(cv2.split(rgb[rows])):
             cv2.multiply(distance, -self._beta[channel], dst=transmission)
             cv2.exp(transmission, dst=transmission)
             # I = B + (J - B) t
             cv2.subtract(plane, self._veil[channel], dst=signal, dtype=cv2.CV_32F)
             cv2.multiply(signal, transmission, dst=signal)
-            if vignette is None and not noise:
-                out.append(cv2.convertScaleAbs(signal, alpha=1.0, beta=self._veil[channel]))
+            if vignette is None and noise is None:
+                planes.append(cv2.convertScaleAbs(signal, alpha=1.0, beta=self._veil[channel]))
                 continue
             cv2.add(signal, self._veil[channel], dst=signal)
             if vignette is not None:
-                cv2.multiply(signal, vignette, dst=signal)
-            if noise:
-                first = start + channel * distance.size
-                draws = bank[first : first + distance.size].reshape(distance.shape)
-                cv2.scaleAdd(draws, self.params.noise_sigma, signal, dst=signal)
+                cv2.multiply(signal, vignette[rows], dst=signal)
+            if noise is not None:
+                cv2.scaleAdd(noise[channel, rows], self.params.noise_sigma, signal, dst=signal)
                 cv2.max(signal, 0.0, dst=signal)  # clip, since convertScaleAbs would mirror negatives
-            out.append(cv2.convertScaleAbs(signal))
-        return cv2.merge(out)
+            planes.append(cv2.convertScaleAbs(signal))
+        out[rows] = cv2.merge(planes)
+
+
+_SPLIT_MIN_ROWS = 64  # smaller frames are not worth a second thread
+_helpers: list[ThreadPoolExecutor] = []
+
+
+def _helper() -> ThreadPoolExecutor:
+    """The thread that computes the upper half of each frame (made on first use)."""
+    if not _helpers:
+        _helpers.append(ThreadPoolExecutor(1, thread_name_prefix="maptidal-water-half"))
+    return _helpers[0]
 
 
 def depth_to_range(depth_m: np.ndarray, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:

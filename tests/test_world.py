@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from envs import rendering
+from envs import water as water_module
 from envs.rendering import renders_on_gpu
 from envs.scenario import RobotSpec, Scenario, ScenarioError, load_scenario, scenario_from_dict
 from envs.sensors import SensorNoise, heading_from_field
@@ -277,3 +278,14 @@ def test_a_closed_or_collected_simulation_frees_its_renderer():
     del again
     gc.collect()
     assert key not in rendering._renderers
+
+
+def test_water_model_gives_the_same_image_with_or_without_its_two_thread_split(monkeypatch):
+    model = WaterModel(WaterParams(turbidity=0.7, noise_sigma=3.0, vignetting=0.3))
+    rng = np.random.default_rng(11)
+    image = rng.integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    ranges = rng.uniform(0.2, 12.0, (240, 320))
+    split = model.apply(image, ranges, np.random.default_rng(4))
+    monkeypatch.setattr(water_module, "_SPLIT_MIN_ROWS", 10_000)
+    whole = model.apply(image, ranges, np.random.default_rng(4))
+    np.testing.assert_array_equal(split, whole)
