@@ -19,7 +19,7 @@ is drawn in the shader, from a counter-based hash (Box-Muller) keyed by a per-fr
 seed. It has the same distribution as the CPU's draws, but is not the same sample.
 
 The shader is GLSL 1.30 and uses the compatibility profile, which MuJoCo's fixed-function
-renderer needs anyway. Where it does not compile, :func:`gl_water_pass` returns None and
+renderer needs anyway. Where it does not compile, :func:`make_gl_water_pass` returns None and
 callers fall back to the CPU model.
 """
 
@@ -149,8 +149,8 @@ _TESTS_OFF = (GL.GL_DEPTH_TEST, GL.GL_BLEND, GL.GL_CULL_FACE, GL.GL_SCISSOR_TEST
 class GLWaterPass:
     """The water model on the GL side of one ``mujoco.Renderer`` (its context must be current).
 
-    Create it through :func:`gl_water_pass`, which makes one per renderer and falls back to None
-    where shaders are unavailable."""
+    Create it through :func:`make_gl_water_pass`, which returns None where shaders are unavailable;
+    :mod:`envs.rendering` keeps one per renderer."""
 
     def __init__(self, renderer: mujoco.Renderer, geometry: CameraGeometry) -> None:
         self.renderer = renderer

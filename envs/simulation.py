@@ -270,7 +270,8 @@ class Simulation:
         if "stereo" not in spec.sensors:
             raise ValueError(f"{robot} has no stereo camera in this scenario")
         cam = self.camera
-        on_gl = water and self.water.params.enabled and self.water_backend == "gl"
+        water = water and self.water.params.enabled
+        on_gl = water and self.water_backend == "gl"
         images: list = []  # arrays, or futures of the CPU water model's results
         depths = []
         for side in ("left", "right"):

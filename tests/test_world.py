@@ -105,6 +105,7 @@ def test_stereo_pair_has_the_disparity_of_a_wall_at_known_distance():
     distance = 0.8
     sim = facing_wall(distance, WaterParams(enabled=False))
     left, right = sim.render_stereo("rov", water=False)
+    np.testing.assert_array_equal(sim.render_stereo("rov")[0], left)  # disabled water changes nothing
     gray = [cv2.cvtColor(image, cv2.COLOR_RGB2GRAY).astype(np.float32) for image in (left, right)]
     (shift_x, shift_y), _ = cv2.phaseCorrelate(gray[1], gray[0])
     expected = sim.camera.fx * sim.camera.baseline_m / distance
