@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -121,7 +121,7 @@ def scenario_from_dict(document: dict, base: Path | None = None) -> Scenario:
         f"physics.control_period_s must be >= timestep_s, got {period!r}",
     )
     water_table = dict(document.get("water", {}))
-    _check_keys(water_table, {"current", "turbidity", "noise_sigma", "vignetting", "enabled"}, "[water]")
+    _check_keys(water_table, {"current"} | {f.name for f in fields(WaterParams)}, "[water]")
     current = _vector(water_table.pop("current", [0.0, 0.0, 0.0]), "water.current")
     try:
         water = WaterParams(**water_table)

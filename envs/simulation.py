@@ -17,11 +17,12 @@ mixed into thruster commands by ArduSub's mixer for the robot's frame; pass
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 import weakref
 from collections.abc import Mapping
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,19 +44,11 @@ from envs.rendering import (
 )
 from envs.scenario import Scenario, load_scenario
 from envs.sensors import RobotSensors
-from envs.water import WaterModel, depth_to_range
+from envs.water import WaterModel, depth_to_range, worker_thread
 from envs.world import RobotPlacement, camera_offsets, compose
 from maptidal.keyframes import StereoCameraParams
 
 WATER_BACKENDS = ("auto", "gl", "cpu")
-_workers: list[ThreadPoolExecutor] = []
-
-
-def _water_worker() -> ThreadPoolExecutor:
-    """The one thread that runs the CPU water model beside rendering (made on first use)."""
-    if not _workers:
-        _workers.append(ThreadPoolExecutor(1, thread_name_prefix="maptidal-water"))
-    return _workers[0]
 
 
 class SimulationError(RuntimeError):
@@ -119,12 +112,12 @@ class Simulation:
         if water_backend not in WATER_BACKENDS:
             raise ValueError(f"water_backend must be one of {WATER_BACKENDS}, got {water_backend!r}")
         self.water = WaterModel(self.scenario.water)
-        self._water_backend = water_backend
-        self._ray_scale: np.ndarray | None = None
-        self._depth_shift, self._depth_scale = (float(v) for v in depth_coefficients(self.model))
+        self._requested_water_backend = water_backend
+        self._resolved_water_backend: str | None = None
+        depth_shift, depth_scale = (float(v) for v in depth_coefficients(self.model))
         cam = self.camera
         self._geometry = CameraGeometry(
-            cam.fx, cam.fy, cam.width / 2, cam.height / 2, self._depth_shift, self._depth_scale
+            cam.fx, cam.fy, cam.width / 2, cam.height / 2, depth_shift, depth_scale
         )
         self.rng = np.random.default_rng()
         self.wall_time_s = 0.0
@@ -299,17 +292,17 @@ class Simulation:
                     raw_depth=True,
                 )
             if buffer is not None:
-                buffer = cv2.add(cv2.flip(buffer, 0), self._depth_shift)
+                buffer = cv2.add(cv2.flip(buffer, 0), self._geometry.depth_shift)
             if water and not on_gl:
                 # range along each ray = (ray length per unit depth x d) / (buffer + c), in one division
-                ranges = cv2.divide(self._range_numerator(buffer), buffer)
+                ranges = cv2.divide(self._range_numerator, buffer)
                 # the left frame's water model runs on a worker thread while the right camera renders
                 # (OpenCV releases the GIL); each frame's noise generator is drawn here, in order
                 frame_rng = np.random.default_rng(int(self.rng.integers(1 << 63)))
-                rgb = _water_worker().submit(self.water.apply, rgb, ranges, frame_rng)
+                rgb = worker_thread("maptidal-water").submit(self.water.apply, rgb, ranges, frame_rng)
             images.append(rgb)
             if depth:
-                depths.append(cv2.divide(self._depth_scale, buffer))
+                depths.append(cv2.divide(self._geometry.depth_scale, buffer))
         images = [image.result() if isinstance(image, Future) else image for image in images]
         return (*images, *depths) if depth else tuple(images)
 
@@ -319,24 +312,26 @@ class Simulation:
         (:class:`envs.water.WaterModel`). ``"gl"`` at construction raises RuntimeError where the
         shader cannot run. ``"auto"`` picks GL on a GPU and the CPU model on a CPU rasteriser
         (Mesa llvmpipe), where the shader is no faster (README, rendering bench)."""
-        if self._water_backend in ("auto", "gl"):
+        if self._resolved_water_backend is None:
+            requested = self._requested_water_backend
             height, width = self.camera.height, self.camera.width
-            if self._water_backend == "auto" and not renders_on_gpu(self.model, height, width):
-                self._water_backend = "cpu"
+            if requested == "cpu" or (requested == "auto" and not renders_on_gpu(self.model, height, width)):
+                self._resolved_water_backend = "cpu"
             elif gl_water_available(self.model, height, width, self._geometry):
-                self._water_backend = "gl"
-            elif self._water_backend == "gl":
+                self._resolved_water_backend = "gl"
+            elif requested == "gl":
                 raise RuntimeError("water_backend='gl' asked for, but the water shader cannot run here")
             else:
-                self._water_backend = "cpu"
-        return self._water_backend
+                self._resolved_water_backend = "cpu"
+        return self._resolved_water_backend
 
-    def _range_numerator(self, like: np.ndarray) -> np.ndarray:
-        if self._ray_scale is None:
-            cam = self.camera
-            ray_scale = depth_to_range(np.ones_like(like), cam.fx, cam.fy, cam.width / 2, cam.height / 2)
-            self._ray_scale = (ray_scale * self._depth_scale).astype(np.float32)
-        return self._ray_scale
+    @functools.cached_property
+    def _range_numerator(self) -> np.ndarray:
+        """Per pixel, ray length per unit planar depth times the depth-buffer scale: dividing it by
+        (buffer + shift) gives range along the ray."""
+        g = self._geometry
+        ones = np.ones((self.camera.height, self.camera.width), np.float32)
+        return (depth_to_range(ones, g.fx, g.fy, g.cx, g.cy) * g.depth_scale).astype(np.float32)
 
     def intrinsics(self) -> dict:
         """Calibration of each stereo camera: K matrix, image size, baseline (m), and the

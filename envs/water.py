@@ -22,6 +22,7 @@ water; sensor noise (optional) is drawn independently per camera, as on real sen
 
 from __future__ import annotations
 
+import functools
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -135,7 +136,9 @@ class WaterModel:
             self._apply_rows(rgb, distance, vignette, noise, out, slice(0, height))
             return out
         middle = height // 2
-        upper = _helper().submit(self._apply_rows, rgb, distance, vignette, noise, out, slice(0, middle))
+        # its own thread: the simulation's water thread may be the caller, waiting on this half
+        half_thread = worker_thread("maptidal-water-half")
+        upper = half_thread.submit(self._apply_rows, rgb, distance, vignette, noise, out, slice(0, middle))
         self._apply_rows(rgb, distance, vignette, noise, out, slice(middle, height))
         upper.result()
         return out
@@ -174,14 +177,13 @@ class WaterModel:
 
 
 _SPLIT_MIN_ROWS = 64  # smaller frames are not worth a second thread
-_helpers: list[ThreadPoolExecutor] = []
 
 
-def _helper() -> ThreadPoolExecutor:
-    """The thread that computes the upper half of each frame (made on first use)."""
-    if not _helpers:
-        _helpers.append(ThreadPoolExecutor(1, thread_name_prefix="maptidal-water-half"))
-    return _helpers[0]
+@functools.cache
+def worker_thread(name: str) -> ThreadPoolExecutor:
+    """The process's single worker thread called ``name``, made on first use. Work that waits on
+    another worker must use a different name, or the one thread would wait on itself."""
+    return ThreadPoolExecutor(1, thread_name_prefix=name)
 
 
 def depth_to_range(depth_m: np.ndarray, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
