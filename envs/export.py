@@ -31,8 +31,8 @@ import numpy as np
 from envs.scenario import Scenario
 from envs.vehicle import VehicleParams
 from envs.world import RobotPlacement, build_robot_spec, build_tank_spec, compose
+from maptidal.camera import StereoCameraParams
 from maptidal.files import atomic_write_bytes, atomic_write_text
-from maptidal.keyframes import StereoCameraParams
 
 _README = """# Exported maptidal world: {name}
 

@@ -30,6 +30,37 @@ from envs.gl_water import (
 )
 from envs.water import WaterParams
 
+# What a camera in the water sees: surfaces only. MuJoCo's default options also draw rangefinder rays
+# (the DVL beams, as bright yellow lines in other robots' images), sites and the like.
+_SCENE_FLAGS = (
+    mujoco.mjtVisFlag.mjVIS_TEXTURE,
+    mujoco.mjtVisFlag.mjVIS_STATIC,
+    mujoco.mjtVisFlag.mjVIS_SKIN,
+    mujoco.mjtVisFlag.mjVIS_FLEXSKIN,
+)
+
+
+def camera_scene_option() -> mujoco.MjvOption:
+    """Visual options for a simulated camera: every sensor and debug visual off.
+
+    Rangefinder rays, sites, frames, labels, joints, actuators, tendons, lights, cameras, contact
+    points and forces, centres of mass, perturbation and selection markers are not drawn; geoms of
+    groups 0 to 2 (the scene) are, with their textures. Group 3 holds the collision-only geoms.
+    """
+    option = mujoco.MjvOption()
+    option.flags[:] = 0
+    for flag in _SCENE_FLAGS:
+        option.flags[flag] = 1
+    option.frame = mujoco.mjtFrame.mjFRAME_NONE
+    option.label = mujoco.mjtLabel.mjLABEL_NONE
+    for groups in (option.sitegroup, option.jointgroup, option.tendongroup, option.actuatorgroup):
+        groups[:] = 0
+    option.geomgroup[:] = 0
+    option.geomgroup[:3] = 1
+    return option
+
+
+CAMERA_SCENE_OPTION = camera_scene_option()
 _renderers: dict[int, mujoco.Renderer] = {}
 # the GL water pass of each renderer (None where shaders are unavailable), keyed by id(renderer)
 _water_passes: dict[int, GLWaterPass | None] = {}
@@ -79,7 +110,7 @@ def _draw(
 ) -> mujoco.Renderer:
     """Draw ``camera`` into the shared renderer's off-screen buffer; returns that renderer."""
     renderer = shared_renderer(model, height, width)
-    renderer.update_scene(data, camera=camera)
+    renderer.update_scene(data, camera=camera, scene_option=CAMERA_SCENE_OPTION)
     ctx = renderer._mjr_context  # the Renderer's own context: reuse it rather than make another
     renderer._gl_context.make_current()
     mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, ctx)

@@ -46,7 +46,7 @@ from envs.scenario import Scenario, load_scenario
 from envs.sensors import RobotSensors
 from envs.water import WaterModel, depth_to_range, worker_thread
 from envs.world import RobotPlacement, camera_offsets, compose
-from maptidal.keyframes import StereoCameraParams
+from maptidal.camera import StereoCameraParams
 
 WATER_BACKENDS = ("auto", "gl", "cpu")
 
@@ -116,9 +116,7 @@ class Simulation:
         self._resolved_water_backend: str | None = None
         depth_shift, depth_scale = (float(v) for v in depth_coefficients(self.model))
         cam = self.camera
-        self._geometry = CameraGeometry(
-            cam.fx, cam.fy, cam.width / 2, cam.height / 2, depth_shift, depth_scale
-        )
+        self._geometry = CameraGeometry(cam.fx, cam.fy, cam.cx, cam.cy, depth_shift, depth_scale)
         self.rng = np.random.default_rng()
         self.wall_time_s = 0.0
         # the process-wide renderer of this model (and its GL context) goes when the simulation does
@@ -334,18 +332,22 @@ class Simulation:
         return (depth_to_range(ones, g.fx, g.fy, g.cx, g.cy) * g.depth_scale).astype(np.float32)
 
     def intrinsics(self) -> dict:
-        """Calibration of each stereo camera: K matrix, image size, baseline (m), and the
-        extrinsics: camera-to-body rotation and position (x forward, y left, z up)."""
+        """Calibration of each stereo camera: K matrix (pixels), image size, baseline (m), field of
+        view (deg), and the extrinsics: camera-to-body rotation and position (x forward, y left, z up).
+
+        The numbers are those of :class:`maptidal.camera.StereoCameraParams` (the OAK-D's stereo pair by
+        default), the same camera the renderer draws with."""
         cam = self.camera
-        K = [[cam.fx, 0.0, cam.width / 2], [0.0, cam.fy, cam.height / 2], [0.0, 0.0, 1.0]]
         # optical frame (x right, y down, z forward) in body axes
         optical_to_body = [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]
         vehicle = self._specs[self.robots[0]].vehicle
         return {
             "width": cam.width,
             "height": cam.height,
-            "K": K,
+            "K": cam.matrix().tolist(),
             "baseline_m": cam.baseline_m,
+            "hfov_deg": cam.hfov_deg,
+            "vfov_deg": cam.vfov_deg,
             "optical_to_body": optical_to_body,
             "positions_body": {side: pos.tolist() for side, pos in camera_offsets(vehicle, cam).items()},
         }

@@ -18,10 +18,14 @@ import numpy as np
 from envs.hydrodynamics import userdata_size
 from envs.textures import TextureParams, concrete_texture, floor_texture, fouling_texture
 from envs.vehicle import VehicleParams
-from maptidal.keyframes import StereoCameraParams
+from maptidal.camera import StereoCameraParams
 from maptidal.tank import TankModel
 
 WALL_THICKNESS = 0.1  # m, collision boxes behind each surface
+# Geom groups: 0 the tank's surfaces and the ladder (the geometry of maptidal.tank.TankModel) and the
+# robots' visible parts; 1 thin decorations on the surfaces (window frame, fouling discs); 3 the
+# invisible collision geoms. Cameras draw groups 0 to 2 (envs.rendering).
+DECORATION_GROUP = 1
 _S = mujoco.mjtSensor
 # Every robot's MuJoCo sensors: (name, type, site); envs.sensors reads them by these names.
 ROBOT_SENSORS: tuple[tuple[str, mujoco.mjtSensor, str], ...] = (
@@ -44,9 +48,17 @@ class RobotPlacement:
     yaw: float = 0.0
 
 
-def _quat_from_axes(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+def quat_from_axes(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The unit quaternion (w, x, y, z) of the frame whose axes are ``x``, ``y`` and ``z``.
+
+    The axes must be orthonormal and right-handed: ``mju_mat2Quat`` silently turns a reflection
+    (determinant -1) into some rotation, which once put the ladder's rungs across the wall.
+    """
+    matrix = np.column_stack([x, y, z]).astype(float)
+    if not np.allclose(matrix.T @ matrix, np.eye(3), atol=1e-6) or np.linalg.det(matrix) < 0.0:
+        raise ValueError(f"axes are not a right-handed orthonormal frame: {matrix.T.round(4).tolist()}")
     quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, np.column_stack([x, y, z]).ravel())
+    mujoco.mju_mat2Quat(quat, matrix.ravel())
     return quat
 
 
@@ -75,7 +87,7 @@ def _add_quad(body, corners: np.ndarray, normal: np.ndarray, material: str, coll
     n = np.asarray(normal, float)
     if np.dot(np.cross(u, v), n) < 0:
         u, v, lu, lv = v, u, lv, lu
-    quat = _quat_from_axes(u, v, n)
+    quat = quat_from_axes(u, v, n)
     centre = corners.mean(axis=0)
     body.add_geom(
         type=mujoco.mjtGeom.mjGEOM_PLANE,
@@ -132,7 +144,7 @@ def build_tank_spec(tank: TankModel, textures: TextureParams | None = None) -> m
             type=mujoco.mjtGeom.mjGEOM_BOX,
             size=half,
             pos=centre,
-            quat=_quat_from_axes(*axes),
+            quat=quat_from_axes(*axes),
             material="steel",
         )
     _add_fouling(world, tank)
@@ -164,10 +176,11 @@ def _add_window_frame(world, tank: TankModel) -> None:
             type=mujoco.mjtGeom.mjGEOM_BOX,
             size=[length / 2 + width, width / 2, 0.005],
             pos=centre,
-            quat=_quat_from_axes(u, v, normal),
+            quat=quat_from_axes(u, v, normal),
             material="window_frame",
             contype=0,
             conaffinity=0,
+            group=DECORATION_GROUP,
         )
 
 
@@ -182,10 +195,11 @@ def _add_fouling(world, tank: TankModel) -> None:
             type=mujoco.mjtGeom.mjGEOM_CYLINDER,
             size=[patch.radius, 0.003, 0],
             pos=points[0] + n * 0.004,
-            quat=_quat_from_axes(u, np.cross(n, u), n),
+            quat=quat_from_axes(u, np.cross(n, u), n),
             material="fouling",
             contype=0,
             conaffinity=0,
+            group=DECORATION_GROUP,
         )
 
 
@@ -253,10 +267,10 @@ def build_robot_spec(vehicle: VehicleParams, camera: StereoCameraParams | None =
     for k, (pos, direction) in enumerate(
         zip(vehicle.thruster_positions, vehicle.thruster_directions, strict=True)
     ):
-        z = np.asarray(direction, float)
+        z = np.asarray(direction, float) / np.linalg.norm(direction)
         x = np.cross([0.0, 0.0, 1.0], z) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
         x /= np.linalg.norm(x)
-        quat = _quat_from_axes(x, np.cross(z, x), z)
+        quat = quat_from_axes(x, np.cross(z, x), z)
         base.add_site(name=f"thruster{k + 1}", pos=list(pos), quat=quat, size=[0.01, 0, 0])
         base.add_geom(
             type=mujoco.mjtGeom.mjGEOM_CYLINDER,
@@ -283,7 +297,7 @@ def build_robot_spec(vehicle: VehicleParams, camera: StereoCameraParams | None =
         cam = base.add_camera(
             name=side,
             pos=list(position),
-            quat=_quat_from_axes(
+            quat=quat_from_axes(
                 np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 1.0]), np.array([-1.0, 0.0, 0.0])
             ),
         )
@@ -310,7 +324,7 @@ def build_robot_spec(vehicle: VehicleParams, camera: StereoCameraParams | None =
         x = np.cross([0.0, 0.0, 1.0], z)
         x /= np.linalg.norm(x)
         base.add_site(
-            name=f"beam{k}", pos=list(mounts.dvl_position), quat=_quat_from_axes(x, np.cross(z, x), z)
+            name=f"beam{k}", pos=list(mounts.dvl_position), quat=quat_from_axes(x, np.cross(z, x), z)
         )
     for name, kind, site in ROBOT_SENSORS:
         sensor = spec.add_sensor(name=name, type=kind, objname=site)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from maptidal.camera import OAKD_VFOV_DEG
 from maptidal.tank import TankModel
 
 
@@ -121,7 +122,7 @@ class BoustrophedonParams:
     overlap_m: float = 0.1
     long_section_m: float = 1.0
     interpolation_points: int = 2
-    vfov_deg: float = 57.0
+    vfov_deg: float = OAKD_VFOV_DEG
 
     def lane_spacing(self) -> float:
         """Camera footprint height at the standoff minus the lateral overlap."""

@@ -29,6 +29,7 @@ import numpy as np
 import trimesh
 from scipy.stats import gamma
 
+from maptidal.camera import OAKD_HFOV_DEG, OAKD_VFOV_DEG
 from maptidal.geometry import CameraModel, frustum_masks
 from maptidal.raycast import visible_from
 from maptidal.tank import TankModel
@@ -45,8 +46,8 @@ class CoverageParams:
 
     voxel_m: float = 0.05
     far_m: float = 2.0
-    hfov_deg: float = 72.0
-    vfov_deg: float = 57.0
+    hfov_deg: float = OAKD_HFOV_DEG
+    vfov_deg: float = OAKD_VFOV_DEG
     occlusion: bool = False
 
     def __post_init__(self) -> None:

@@ -23,7 +23,8 @@ from maptidal.synthetic import wall_keyframe_mesh
 class DemoConfig:
     """Keyframe pass along the wall: frame centres (y, m) and the patch each camera sees.
 
-    The 1.7 x 1.3 m patch is roughly the OAK-D footprint (72 x 57 deg) from 1.2 m.
+    The 1.7 x 1.3 m patch is roughly the OAK-D footprint (78.5 x 54 deg, maptidal.camera) from
+    1 to 1.2 m (1.6 x 1.0 m at 1 m, 2.0 x 1.2 m at 1.2 m).
     """
 
     frame_centres_y: tuple[float, ...] = (-1.2, -0.6, 0.0, 0.6, 1.2)

@@ -34,6 +34,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from maptidal.camera import OAKD_HFOV_DEG, OAKD_VFOV_DEG
 from maptidal.geometry import CameraModel, SpatialGrid, count_in_frustums, frustum_count_bounds, view_angles
 
 __all__ = [
@@ -70,8 +71,8 @@ class DiscoveryParams:
 
     Defaults are the paper's best values (Section IV.D and Table I): L_i = 1.0 m,
     r_ex = 1.7 m, theta_ex = 0.25 rad, t = 75 %, p_s = 70 % (Section III.B), and the
-    OAK-D field of view of about 72 x 57 deg. ``range_m`` (the frustum's far plane)
-    defaults to ``2 * standoff``.
+    OAK-D stereo pair's field of view, 78.5 x 54.1 deg (:mod:`maptidal.camera`). ``range_m``
+    (the frustum's far plane) defaults to ``2 * standoff``.
     """
 
     standoff: float = 1.0
@@ -79,8 +80,8 @@ class DiscoveryParams:
     theta_ex: float = 0.25
     threshold: float = 0.75
     p_s: float = 0.7
-    hfov_deg: float = 72.0
-    vfov_deg: float = 57.0
+    hfov_deg: float = OAKD_HFOV_DEG
+    vfov_deg: float = OAKD_VFOV_DEG
     range_m: float | None = None
 
     def __post_init__(self) -> None:

@@ -25,6 +25,7 @@ from maptidal.baselines import (
     boustrophedon_viewpoints,
     voronoi_viewpoints,
 )
+from maptidal.camera import StereoCameraParams
 from maptidal.coverage import CoverageModel, CoverageParams, CoverageReport
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
 from maptidal.files import atomic_write_json, atomic_write_text, save_tasks
@@ -32,7 +33,6 @@ from maptidal.keyframes import (
     ExplorationParams,
     FeatureParams,
     Keyframe,
-    StereoCameraParams,
     exploration_keyframes,
 )
 from maptidal.progress import ProgressBar

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from maptidal.camera import OAKD_HFOV_DEG, OAKD_VFOV_DEG
+
 # Beyond this |view . z| the world z-axis is too close to the view axis to define
 # a horizontal image x-axis, so world x becomes the up reference.
 VERTICAL_VIEW_LIMIT = 0.99
@@ -25,13 +27,13 @@ VERTICAL_VIEW_LIMIT = 0.99
 class CameraModel:
     """A pinhole camera's viewing pyramid.
 
-    Defaults are the OAK-D stereo mono sensors used in the paper (about 72 x 57 deg,
-    ../shared/reference/bluerov2.md); the range defaults to 2 m, twice the paper's
-    1 m standoff L_i.
+    Defaults are the pinhole of the OAK-D's stereo pair used in the paper (78.5 x 54.1 deg at
+    640 x 400, from Luxonis' spec sheet: :mod:`maptidal.camera`); the range defaults to 2 m,
+    twice the paper's 1 m standoff L_i.
     """
 
-    hfov_deg: float = 72.0
-    vfov_deg: float = 57.0
+    hfov_deg: float = OAKD_HFOV_DEG
+    vfov_deg: float = OAKD_VFOV_DEG
     range_m: float = 2.0
 
     def __post_init__(self) -> None:

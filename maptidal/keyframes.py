@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from maptidal.camera import StereoCameraParams
 from maptidal.geometry import camera_axes
 from maptidal.perception.mesher import KeyframeMesh, MesherParams, kimera_mesh
 from maptidal.raycast import visible_from
@@ -46,42 +47,6 @@ class FeatureParams:
 
 
 @dataclass(frozen=True)
-class StereoCameraParams:
-    """The virtual stereo camera: OAK-D mono pair (../shared/reference/bluerov2.md).
-
-    640 x 400 with about 72 x 57 deg field of view and a 7.5 cm baseline. The
-    disparity noise of 0.25 px is our assumption (sub-pixel matching; about 0.8 %
-    depth error at 1 m);
-    the range limits and the tracker budget are modelling choices.
-    """
-
-    width: int = 640
-    height: int = 400
-    hfov_deg: float = 72.0
-    vfov_deg: float = 57.0
-    baseline_m: float = 0.075
-    min_range_m: float = 0.3
-    max_range_m: float = 3.5
-    disparity_sigma_px: float = 0.25
-    max_keypoints: int = 300
-    occlusion_tolerance_m: float = 0.03
-
-    @property
-    def fx(self) -> float:
-        """Horizontal focal length in pixels."""
-        return (self.width / 2.0) / math.tan(math.radians(self.hfov_deg) / 2.0)
-
-    @property
-    def fy(self) -> float:
-        """Vertical focal length in pixels (the binned sensor keeps the 57 deg field)."""
-        return (self.height / 2.0) / math.tan(math.radians(self.vfov_deg) / 2.0)
-
-    def depth_sigma(self, depth: np.ndarray) -> np.ndarray:
-        """Stereo depth noise (m) at depth ``depth``: z^2 sigma_d / (f_x b)."""
-        return np.asarray(depth) ** 2 * self.disparity_sigma_px / (self.fx * self.baseline_m)
-
-
-@dataclass(frozen=True)
 class ExplorationParams:
     """The exploration pass: yaw sweeps from one point on the tank's centre line."""
 
@@ -89,7 +54,7 @@ class ExplorationParams:
     heights_m: tuple[float, ...] = (0.7, 1.3)
     yaw_min_deg: float = -90.0
     yaw_max_deg: float = 90.0
-    yaw_step_deg: float = 30.0  # consecutive keyframes overlap by 42 of 72 deg
+    yaw_step_deg: float = 30.0  # consecutive keyframes overlap by 48 of 78.5 deg
 
 
 @dataclass

@@ -410,7 +410,8 @@ class TankModel:
             return []
         seg = self.segment("end")
         t, n, up = seg.tangent, seg.inward_normal, np.array([0.0, 0.0, 1.0])
-        axes = np.array([t, n, up])
+        # a right-handed frame (along the wall, out of the wall, up): a rotation, as MuJoCo needs
+        axes = np.array([t, np.cross(up, t), up])
         origin = (
             np.array([*seg.start, 0.0]) + (seg.length / 2 + ladder.centre_offset) * t + ladder.standoff * n
         )

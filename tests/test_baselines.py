@@ -1,6 +1,5 @@
 """The Voronoi (Lloyd) and boustrophedon baselines."""
 
-import math
 
 import numpy as np
 import pytest
@@ -86,7 +85,8 @@ def test_boustrophedon_lanes_and_points():
     tank = TankModel()
     params = BoustrophedonParams()
     spacing = params.lane_spacing()
-    assert spacing == pytest.approx(2 * math.tan(math.radians(28.5)) - 0.1)
+    # the OAK-D's footprint height at 1 m, from its spec sheet: 400 px x 6 um (binned) / 2.35 mm
+    assert spacing == pytest.approx(400 * 6e-6 / 2.35e-3 - 0.1)
     heights = lane_heights(tank.height, params)
     footprint = spacing + 0.1
     # The lanes' footprints, overlapping by 0.1 m, cover the whole height.
@@ -101,7 +101,7 @@ def test_boustrophedon_lanes_and_points():
     assert len(viewpoints) == len(heights) * len(along)
     _check_viewpoints_look_at_the_wall(tank, viewpoints)
     # Boustrophedon: the second lane runs back the way the first came.
-    first, second = viewpoints[: len(along)], viewpoints[len(along) :]
+    first, second = viewpoints[: len(along)], viewpoints[len(along) : 2 * len(along)]
     np.testing.assert_allclose(first[:, :2], second[::-1, :2])
 
 
@@ -110,6 +110,7 @@ def test_baselines_follow_another_tank():
 
     tank = TankModel(TankConfig(end_wall_width=6.0, water_depth=3.0))
     viewpoints = boustrophedon_viewpoints(tank)
-    assert len(lane_heights(3.0, BoustrophedonParams())) == 3
+    # 3 m at 0.92 m lane spacing with 0.1 m overlap: 3 lanes reach 2.86 m, so 4 are needed
+    assert len(lane_heights(3.0, BoustrophedonParams())) == 4
     _check_viewpoints_look_at_the_wall(tank, viewpoints)
     _check_viewpoints_look_at_the_wall(tank, voronoi_viewpoints(tank))

@@ -6,6 +6,7 @@ import math
 from dataclasses import replace
 
 import cv2
+import mujoco
 import numpy as np
 import pytest
 
@@ -290,3 +291,33 @@ def test_water_model_gives_the_same_image_with_or_without_its_two_thread_split(m
     monkeypatch.setattr(water_module, "_SPLIT_MIN_ROWS", 10_000)
     whole = model.apply(image, ranges, np.random.default_rng(4))
     np.testing.assert_array_equal(split, whole)
+
+
+def _yellow_pixels(image: np.ndarray) -> int:
+    """Pixels of the colour MuJoCo draws rangefinder rays in (yellow: red and green high, blue low)."""
+    r, g, b = (image[..., k].astype(int) for k in range(3))
+    return int(np.count_nonzero((r > 150) & (g > 150) & (b < 90)))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_cameras_do_not_see_another_robots_dvl_beams(backend):
+    # rov1 hovers 2.6 m in front of and below rov0; its four DVL beams run down to the floor in view
+    vehicle = load_vehicle("heavy")
+    specs = (
+        RobotSpec("rov0", vehicle, (-4.0, 0.0, 1.65)),
+        RobotSpec("rov1", vehicle, (-1.2, 0.0, 1.0), yaw_deg=90.0),
+    )
+    clear = WaterParams(turbidity=0.0, noise_sigma=0.0, vignetting=0.0)
+    sim = with_backend(Scenario("beams", TankModel(), specs, water=clear, noise=QUIET), backend)
+    for water in (False, True):
+        left, right = sim.render_stereo("rov0", water=water)
+        assert _yellow_pixels(left) == 0 and _yellow_pixels(right) == 0
+    # the same view with MuJoCo's default visual options shows the beams: the check can see them
+    renderer = rendering.shared_renderer(sim.model, sim.camera.height, sim.camera.width)
+    renderer.update_scene(sim.data, camera="rov0/left")
+    assert _yellow_pixels(renderer.render()) > 100
+    # and the camera option hides every sensor and debug visual
+    option = rendering.camera_scene_option()
+    assert not option.flags[mujoco.mjtVisFlag.mjVIS_RANGEFINDER]
+    assert not option.sitegroup.any() and option.frame == mujoco.mjtFrame.mjFRAME_NONE
+    assert not option.flags[mujoco.mjtVisFlag.mjVIS_CONTACTPOINT]

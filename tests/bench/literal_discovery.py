@@ -22,6 +22,13 @@ import math
 import numpy as np
 from scipy.spatial import Delaunay
 
+# The OAK-D stereo pair from Luxonis' spec sheet, worked out here on its own: 2.35 mm focal length,
+# 3 um pixels binned 2x2 to 640 x 400, so f = 2.35 mm / 6 um px and a pinhole field of view of
+# 2 atan(320 / f) x 2 atan(200 / f).
+_OAKD_F_PX = 2.35e-3 / 6e-6
+OAKD_HFOV_DEG = math.degrees(2 * math.atan(320 / _OAKD_F_PX))
+OAKD_VFOV_DEG = math.degrees(2 * math.atan(200 / _OAKD_F_PX))
+
 
 def distance(x, y):
     """Euclidean distance between the positions of two viewpoints."""
@@ -135,8 +142,8 @@ def task_discovery(
     theta_ex=0.25,
     t=0.75,
     p_s=0.7,
-    hfov_deg=72.0,
-    vfov_deg=57.0,
+    hfov_deg=OAKD_HFOV_DEG,
+    vfov_deg=OAKD_VFOV_DEG,
     far=None,
     keypoints=None,
 ):
