@@ -6,7 +6,7 @@ A command is six numbers in [-1, 1], in this order::
     roll   (right side down +)   pitch (nose up +)   yaw (turn right, clockwise from above +)
 
 These are ArduSub's pilot inputs (forward, lateral, throttle, roll, pitch, yaw in
-AP_Motors6DOF; ../shared/reference/ardusub_mavlink.md), so the same vector drives
+AP_Motors6DOF; docs/references.md), so the same vector drives
 the simulator's mixer and, through MANUAL_CONTROL / RC overrides, a real vehicle.
 Heave is ArduSub's bidirectional throttle: 0 is neutral.
 """
@@ -46,14 +46,24 @@ def pilot_command(values: Sequence[float] | Mapping[str, float] | np.ndarray | N
 
 
 def parse_command(text: str) -> np.ndarray:
-    """Parse ``"surge=1.0,heave=-0.2"`` into a pilot command; unnamed axes are 0."""
+    """Parse ``"surge=1.0,heave=-0.2"`` into a pilot command; unnamed axes are 0.
+
+    Stricter than :func:`pilot_command`, since a person typed it: an axis named twice or a value
+    outside [-1, 1] raises :class:`CommandError` instead of being clipped.
+    """
     values: dict[str, float] = {}
     for item in filter(None, (part.strip() for part in text.split(","))):
         name, sep, value = item.partition("=")
+        name = name.strip()
         if not sep:
             raise CommandError(f"expected axis=value, got {item!r}")
+        if name in values:
+            raise CommandError(f"axis {name!r} is given twice")
         try:
-            values[name.strip()] = float(value)
+            number = float(value)
         except ValueError:
-            raise CommandError(f"{name.strip()}: {value!r} is not a number") from None
+            raise CommandError(f"{name}: {value!r} is not a number") from None
+        if not -1.0 <= number <= 1.0:
+            raise CommandError(f"{name}={value.strip()} is outside [-1, 1] (commands are normalised)")
+        values[name] = number
     return pilot_command(values)

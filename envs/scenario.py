@@ -90,6 +90,16 @@ def inside_tank(tank: TankModel, point: np.ndarray, margin: float = 0.0) -> bool
     return True
 
 
+def hulls_overlap(a: RobotSpec, b: RobotSpec) -> bool:
+    """Whether two robots' hulls could intersect at their start poses, whatever their yaw: each hull is
+    taken as an upright cylinder around its CG, of radius half its longer side and its own height."""
+    (la, wa, ha), (lb, wb, hb) = a.vehicle.hull_size, b.vehicle.hull_size
+    offset = np.subtract(a.position, b.position)
+    apart_horizontally = float(np.hypot(offset[0], offset[1])) >= (max(la, wa) + max(lb, wb)) / 2
+    apart_vertically = abs(float(offset[2])) >= (ha + hb) / 2
+    return not (apart_horizontally or apart_vertically)
+
+
 def _tank_from(value, base: Path) -> TankModel:
     if value in (None, "osb_tank"):
         path = DEFAULT_TANK_CONFIG
@@ -140,6 +150,12 @@ def scenario_from_dict(document: dict, base: Path | None = None) -> Scenario:
         robots.append(_robot_from(entry, k, tank))
         _require(robots[-1].name not in names, f"robot name {robots[-1].name!r} is used twice")
         names.add(robots[-1].name)
+        for other in robots[:-1]:
+            _require(
+                not hulls_overlap(other, robots[-1]),
+                f"robots {other.name!r} and {robots[-1].name!r} start with their hulls overlapping "
+                f"(at {list(other.position)} and {list(robots[-1].position)})",
+            )
     return Scenario(
         name=str(document.get("name", "scenario")),
         tank=tank,

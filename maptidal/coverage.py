@@ -23,6 +23,7 @@ viewpoint reaches it unblocked by the scene; the paper does not do this.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -53,6 +54,7 @@ class CoverageParams:
     def __post_init__(self) -> None:
         if not (np.isfinite(self.voxel_m) and self.voxel_m > 0.0):
             raise ValueError(f"voxel size must be positive, got {self.voxel_m!r}")
+        self.camera  # noqa: B018 - validates the angles and the far plane
 
     @property
     def camera(self) -> CameraModel:
@@ -60,8 +62,23 @@ class CoverageParams:
         return CameraModel(self.hfov_deg, self.vfov_deg, self.far_m)
 
 
+# Voxelising costs about 600 bytes a voxel at its peak: a million voxels stay under a gigabyte.
+MAX_VOXELS = 1_000_000
+
+
 def voxel_centres(surface: trimesh.Trimesh, voxel_m: float) -> np.ndarray:
-    """Centres ``(V, 3)`` of the surface voxels of a mesh (trimesh subdivision voxeliser)."""
+    """Centres ``(V, 3)`` of the surface voxels of a mesh (trimesh subdivision voxeliser).
+
+    Raises ValueError, before any work, when the surface would need more than :data:`MAX_VOXELS`.
+    """
+    estimate = float(surface.area) / voxel_m**2
+    if estimate > MAX_VOXELS:
+        smallest = math.sqrt(float(surface.area) / MAX_VOXELS)
+        raise ValueError(
+            f"a voxel of {voxel_m:g} m gives about {estimate:,.0f} voxels on this surface "
+            f"({surface.area:.1f} m^2); at most {MAX_VOXELS:,} are allowed, so use a voxel of at least "
+            f"{smallest * 1000:.1f} mm"
+        )
     longest = float(surface.edges_unique_length.max()) if len(surface.faces) else 0.0
     # Each subdivision halves the edges; the voxeliser stops when edges < pitch / 2.
     iterations = max(1, int(np.ceil(np.log2(max(longest, voxel_m) / (voxel_m / 2.0)))) + 1)

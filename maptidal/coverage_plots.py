@@ -15,6 +15,7 @@ import numpy as np
 
 from maptidal.coverage import CoverageReport
 from maptidal.files import atomic_write_bytes
+from maptidal.tank import TankModel
 
 METHOD_COLOURS = {"maptidal": "tab:green", "voronoi": "tab:blue", "boustrophedon": "tab:orange"}
 
@@ -50,38 +51,76 @@ def plot_histograms(reports: dict[str, CoverageReport], path: str | os.PathLike,
     _save(figure, path)
 
 
+# The colour scale of views per voxel stops here (darkest: this many views or more). The paper's ideal
+# distribution peaks at 2 views and has almost no mass past 10 (Sec. IV.C), so up to 10 is what matters,
+# and one fixed scale lets maps of different methods compare by eye.
+VIEWS_COLOUR_TOP = 10
+# How far into the water in front of the evaluated walls the voxel maps reach (m): viewpoints stand 1 m off.
+OPEN_WATER_SHOWN_M = 1.5
+
+
+def tank_bounds(tank: TankModel) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper corners (3,) of the water around the evaluated walls, floor to surface, with
+    :data:`OPEN_WATER_SHOWN_M` of open water in front of them."""
+    ends = [np.r_[seg.start, 0.0] for seg in tank.segments] + [np.r_[tank.segments[-1].end, 0.0]]
+    corners = np.vstack(ends)
+    low, high = corners.min(axis=0), corners.max(axis=0)
+    low[0] -= OPEN_WATER_SHOWN_M
+    high[2] = tank.height
+    return low, high
+
+
 def plot_voxel_views(
     voxels: np.ndarray,
     views: np.ndarray,
     viewpoints: np.ndarray,
     path: str | os.PathLike,
     title: str = "",
+    tank: TankModel | None = None,
+    vmax: int | None = None,
 ) -> None:
-    """Voxels coloured by their view count, with the viewpoints as arrows (Fig. 7)."""
-    figure = plt.figure(figsize=(8, 6))
+    """Voxels coloured by their view count, with the viewpoints as arrows (Fig. 7).
+
+    ``vmax`` is the top of the colour scale (default :data:`VIEWS_COLOUR_TOP`, the same for every map).
+    With ``tank`` the axes are the water around the evaluated walls (:func:`tank_bounds`), and
+    viewpoints outside it (behind a wall, under the floor, above the surface) are counted in the legend
+    but not drawn.
+    """
+    figure = plt.figure(figsize=(8.5, 6.2))
     axes = figure.add_subplot(projection="3d")
     unseen = views == 0
-    vmax = max(4, int(np.percentile(views, 99))) if len(views) else 4
+    vmax = vmax if vmax is not None else VIEWS_COLOUR_TOP
     points = axes.scatter(
         *voxels[~unseen].T, c=views[~unseen], cmap="Reds", vmin=0, vmax=vmax, s=3, depthshade=False
     )
     if unseen.any():
         axes.scatter(*voxels[unseen].T, c="0.25", s=3, depthshade=False, label="never viewed")
-    if len(viewpoints):
-        axes.quiver(
-            *viewpoints[:, :3].T, *viewpoints[:, 3:6].T, length=0.35, color="tab:blue", label="viewpoints"
-        )
-    figure.colorbar(points, ax=axes, shrink=0.6, label="views per voxel")
-    everything = np.vstack([voxels, viewpoints[:, :3]]) if len(viewpoints) else voxels
-    low, high = everything.min(axis=0), everything.max(axis=0)
+    if tank is not None:
+        low, high = tank_bounds(tank)
+        margin = 0.05
+    else:
+        everything = np.vstack([voxels, viewpoints[:, :3]]) if len(viewpoints) else voxels
+        low, high, margin = everything.min(axis=0), everything.max(axis=0), 0.0
+    inside = np.all((viewpoints[:, :3] >= low - margin) & (viewpoints[:, :3] <= high + margin), axis=1)
+    if inside.any():
+        label = f"viewpoints ({int(inside.sum())})"
+        if not inside.all():
+            label += f"; {int((~inside).sum())} outside the water not drawn"
+        shown = viewpoints[inside]
+        axes.quiver(*shown[:, :3].T, *shown[:, 3:6].T, length=0.35, color="tab:blue", label=label)
+    label = f"views per voxel (darkest: {vmax} or more)"
+    figure.colorbar(points, ax=axes, shrink=0.6, pad=0.1, extend="max", label=label)
+    for set_limits, k in ((axes.set_xlim, 0), (axes.set_ylim, 1), (axes.set_zlim, 2)):
+        set_limits(low[k] - margin, high[k] + margin)
     axes.set_box_aspect(np.maximum(high - low, 0.1))
     axes.view_init(elev=30, azim=200)  # from inside the tank, facing the end wall
     axes.set_xlabel("x (m)")
     axes.set_ylabel("y (m)")
-    axes.set_zlabel("z (m)")
+    axes.zaxis.set_rotate_label(False)  # matplotlib otherwise turns it to read "(m) z"
+    axes.set_zlabel("z (m)", rotation=90, labelpad=6)
     axes.set_title(title)
     axes.legend(loc="upper left", fontsize=8)
-    figure.tight_layout()
+    figure.subplots_adjust(left=0.06, right=0.92, bottom=0.02, top=0.95)
     _save(figure, path)
 
 
@@ -104,7 +143,10 @@ def plot_sweep_heatmaps(rows: list[dict], path: str | os.PathLike) -> None:
         for i, (key, label, cmap) in enumerate(metrics):
             values = np.array([[lookup[(t, r, angle)][key] for r in radii] for t in thresholds], dtype=float)
             axes = grid[i, j]
-            image = axes.imshow(values, cmap=cmap, aspect="auto")
+            low, high = float(values.min()), float(values.max())
+            if high - low < 1e-12:  # a flat panel (say 0 % uninspected everywhere): centre its one colour
+                low, high = low - max(1.0, abs(low)) * 0.5, high + max(1.0, abs(high)) * 0.5
+            image = axes.imshow(values, cmap=cmap, aspect="auto", vmin=low, vmax=high)
             for a in range(len(thresholds)):
                 for b in range(len(radii)):
                     text = f"{values[a, b]:.0f}" if key == "tasks" else f"{values[a, b]:.2f}"

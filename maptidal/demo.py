@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from maptidal.discovery import DiscoveryParams, DiscoveryResult, discover
-from maptidal.files import atomic_write_json, atomic_write_text, save_tasks
+from maptidal.files import atomic_write_json, atomic_write_text, save_mesh, save_tasks
 from maptidal.synthetic import wall_keyframe_mesh
 
 
@@ -57,6 +57,7 @@ def run_demo(
             n_keypoints=config.keypoints_per_frame,
             seed=config.seed + frame,
         )
+        save_mesh(out_dir / f"frame{frame:02d}.ply", vertices, faces)
         result = discover(vertices, faces, existing=existing, params=params)
         results.append(result)
         save_tasks(out_dir / f"frame{frame:02d}_tasks.json", result.final, counts=result.counts)
@@ -99,7 +100,8 @@ def run_demo(
         "|---|---|---|---|---|---|---|",
         *rows,
         "",
-        "Files: `tasks.json` (all tasks), `frameNN_tasks.json` and `frameNN.png` per keyframe.",
+        "Files: `tasks.json` (all tasks); per keyframe its mesh `frameNN.ply`, tasks `frameNN_tasks.json` "
+        "and plot `frameNN.png`. Try `maptidal discover frame00.ply` on a mesh.",
         "",
     ]
     atomic_write_text(out_dir / "report.md", "\n".join(report))

@@ -30,12 +30,19 @@ line-by-line transcription used as the oracle.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from maptidal.camera import OAKD_HFOV_DEG, OAKD_VFOV_DEG
-from maptidal.geometry import CameraModel, SpatialGrid, count_in_frustums, frustum_count_bounds, view_angles
+from maptidal.geometry import (
+    MAX_DISTANCE_M,
+    CameraModel,
+    SpatialGrid,
+    count_in_frustums,
+    frustum_count_bounds,
+    view_angles,
+)
 
 __all__ = [
     "DiscoveryInputError",
@@ -94,6 +101,12 @@ class DiscoveryParams:
         for name, value in positive.items():
             if not (math.isfinite(value) and value > 0.0):
                 raise DiscoveryInputError(f"{name} must be a positive finite number, got {value!r}")
+        for name in ("standoff", "r_ex"):
+            if getattr(self, name) > MAX_DISTANCE_M:
+                raise DiscoveryInputError(
+                    f"{name} must be at most {MAX_DISTANCE_M:g} m (a camera under water sees a few metres), "
+                    f"got {getattr(self, name)!r}"
+                )
         if not self.theta_ex <= math.pi:
             raise DiscoveryInputError(f"theta_ex must be at most pi rad, got {self.theta_ex!r}")
         if not self.p_s <= 1.0:
@@ -116,10 +129,17 @@ class DiscoveryParams:
         return CameraModel(self.hfov_deg, self.vfov_deg, self.far_range)
 
     def to_dict(self) -> dict[str, float]:
-        """Parameters as plain numbers, with the resolved ``range_m``."""
-        values = asdict(self)
-        values["range_m"] = self.far_range
-        return values
+        """Parameters as plain numbers named with their units, with the resolved ``range_m``."""
+        return {
+            "standoff_m": self.standoff,
+            "r_ex_m": self.r_ex,
+            "theta_ex_rad": self.theta_ex,
+            "threshold": self.threshold,
+            "p_s": self.p_s,
+            "hfov_deg": self.hfov_deg,
+            "vfov_deg": self.vfov_deg,
+            "range_m": self.far_range,
+        }
 
 
 @dataclass

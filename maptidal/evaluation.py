@@ -13,6 +13,7 @@ import csv
 import io
 import itertools
 import os
+import signal
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -231,7 +232,8 @@ def run_compare(
         for name in viewpoints:
             share = reports[name].pct_uninspected
             title = f"{name}: {len(viewpoints[name])} viewpoints, {share:.1f}% uninspected"
-            plot_voxel_views(model.voxels, views[name], viewpoints[name], out / f"voxels_{name}.png", title)
+            path = out / f"voxels_{name}.png"
+            plot_voxel_views(model.voxels, views[name], viewpoints[name], path, title, tank=tank)
             bar.advance(note=f"voxels_{name}.png")
     atomic_write_text(out / "report.md", compare_report(document, plots))
     return document
@@ -307,7 +309,14 @@ def parse_grid(tokens: list[str]) -> dict[str, tuple[float, ...]]:
     return grid
 
 
-def _worker_setup(config: EvaluationConfig) -> None:
+def grid_size(grid: dict[str, tuple[float, ...]]) -> int:
+    """How many combinations a sweep grid has."""
+    return len(grid["t"]) * len(grid["r_ex"]) * len(grid["theta_ex"])
+
+
+def _worker_setup(config: EvaluationConfig, in_subprocess: bool = False) -> None:
+    if in_subprocess:  # Ctrl-C is the parent's to handle: workers must not print tracebacks
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     tank = TankModel(load_tank_config(config.tank_path))
     _WORKER_STATE["config"] = config
     _WORKER_STATE["model"] = CoverageModel.from_tank(tank, config.coverage)
@@ -342,6 +351,7 @@ def run_sweep(
         for value in values:
             replace(config.discovery, **{GRID_TO_PARAM[name]: value})  # validates every value up front
     combinations = list(itertools.product(grid["t"], grid["r_ex"], grid["theta_ex"]))
+    jobs = max(1, min(jobs, len(combinations), os.cpu_count() or 1))  # more would only wait
     bar = ProgressBar(len(combinations), "sweep", enabled=progress)
     out = Path(out_dir) if out_dir is not None else None
     results: dict[int, dict] = {}
@@ -350,7 +360,7 @@ def run_sweep(
         outcomes = map(_evaluate_combination, combinations)
         executor = None
     else:
-        executor = ProcessPoolExecutor(max_workers=jobs, initializer=_worker_setup, initargs=(config,))
+        executor = ProcessPoolExecutor(max_workers=jobs, initializer=_worker_setup, initargs=(config, True))
         outcomes = executor.map(_evaluate_combination, combinations)
     try:
         for index, row in enumerate(outcomes):
@@ -362,7 +372,7 @@ def run_sweep(
                 atomic_write_text(out / "sweep.csv", sweep_csv([results[k] for k in sorted(results)]))
     finally:
         if executor is not None:
-            executor.shutdown()
+            executor.shutdown(cancel_futures=True)
     rows = [results[k] for k in sorted(results)]
     if out is not None:
         atomic_write_text(out / "sweep.md", sweep_markdown(rows))

@@ -123,6 +123,21 @@ def load_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     return validate_mesh(vertices, faces)
 
 
+def save_mesh(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray) -> Path:
+    """Write a triangle mesh atomically; the format follows the suffix (.ply, .obj or .stl).
+
+    Vertex and face order are kept (no merging or reordering), so :func:`load_mesh` reads back the
+    same mesh and discovery gives the same tasks.
+    """
+    import trimesh
+
+    path = Path(path)
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise DiscoveryInputError(f"{path}: a mesh file must end in one of {', '.join(MESH_SUFFIXES)}")
+    mesh = trimesh.Trimesh(np.asarray(vertices, float), np.asarray(faces), process=False)
+    return atomic_write_bytes(path, mesh.export(file_type=path.suffix.lower()[1:]))
+
+
 def load_keypoints(path: str | os.PathLike) -> np.ndarray:
     """Load keypoints ``(K, 3)`` from a .npy array or a PLY point cloud (or mesh vertices)."""
     import trimesh

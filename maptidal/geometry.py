@@ -21,6 +21,9 @@ from maptidal.camera import OAKD_HFOV_DEG, OAKD_VFOV_DEG
 # Beyond this |view . z| the world z-axis is too close to the view axis to define
 # a horizontal image x-axis, so world x becomes the up reference.
 VERTICAL_VIEW_LIMIT = 0.99
+# The longest distance (m) a frustum, standoff or exclusion radius may have: far beyond what a camera
+# sees under water, and small enough that grid cell indices stay finite.
+MAX_DISTANCE_M = 100.0
 
 
 @dataclass(frozen=True)
@@ -41,8 +44,8 @@ class CameraModel:
             value = getattr(self, name)
             if not (math.isfinite(value) and 0.0 < value < 180.0):
                 raise ValueError(f"{name} must be in (0, 180) degrees, got {value!r}")
-        if not (math.isfinite(self.range_m) and self.range_m > 0.0):
-            raise ValueError(f"range_m must be a positive finite distance, got {self.range_m!r}")
+        if not (math.isfinite(self.range_m) and 0.0 < self.range_m <= MAX_DISTANCE_M):
+            raise ValueError(f"range_m must be a distance in (0, {MAX_DISTANCE_M:g}] m, got {self.range_m!r}")
 
     @property
     def tan_half_h(self) -> float:

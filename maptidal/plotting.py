@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import os
 from pathlib import Path
 
@@ -14,6 +15,7 @@ import numpy as np
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from maptidal.discovery import DiscoveryResult
+from maptidal.files import atomic_write_bytes
 
 ARROW_LENGTH_M = 0.3
 
@@ -75,7 +77,7 @@ def plot_discovery(
                 c="tab:blue",
                 label=f"after pruning ({counts['after_prune']}, {result.pruning_mode})",
             )
-            axes.set_title("1-2: candidates and pruning")
+            axes.set_title("Candidate inspection points (CIPs) and those kept by pruning")
         else:
             kept_remains = result.final[len(result.confirmed) :]
             _arrows(axes, existing, "black", f"existing tasks ({len(existing)})")
@@ -83,19 +85,17 @@ def plot_discovery(
             _arrows(axes, kept_remains, "yellowgreen", f"kept by final pruning ({len(kept_remains)})")
             if len(result.remains):
                 axes.scatter(*result.remains[:, :3].T, s=6, c="tab:red", alpha=0.5, label="scored below t")
-            axes.set_title(f"3-4: scores and final pruning -> {counts['final']} new tasks")
+            axes.set_title(f"Keypoint scores and final pruning: {counts['final']} new tasks")
         axes.set_xlabel("x (m)")
         axes.set_ylabel("y (m)")
-        axes.set_zlabel("z (m)")
+        axes.zaxis.set_rotate_label(False)  # matplotlib otherwise turns it to read "(m) z"
+        axes.set_zlabel("z (m)", rotation=90, labelpad=6)
         _equal_axes(axes, everything)
         axes.view_init(elev=18, azim=-150)
         axes.legend(loc="upper left", fontsize=8)
     figure.suptitle(title)
-    figure.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.tmp.png")
-    figure.savefig(temporary, dpi=110)
+    figure.subplots_adjust(left=0.02, right=0.96, bottom=0.04, top=0.9, wspace=0.08)
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=110)
     plt.close(figure)
-    os.replace(temporary, path)
-    return path
+    return atomic_write_bytes(path, buffer.getvalue())

@@ -169,6 +169,13 @@ def _build(cls, table: dict, where: str, renames: dict[str, str] | None = None):
 def tank_config_from_dict(document: dict) -> TankConfig:
     """Build a validated :class:`TankConfig` from a parsed TOML document."""
     _require(isinstance(document, dict), "a tank config must be a TOML table")
+    _require(
+        bool(document),
+        "the tank config is empty; it needs at least water_depth and [end_wall] width "
+        "(assets/osb_tank/tank.toml shows every key)",
+    )
+    for key, where in (("water_depth", "water_depth"), ("end_wall", "[end_wall] width")):
+        _require(key in document, f"the tank config has no {where}: a tank's size cannot be guessed")
     top_level = {
         "name",
         "water_depth",

@@ -1,6 +1,5 @@
 """The Voronoi (Lloyd) and boustrophedon baselines."""
 
-
 import numpy as np
 import pytest
 from geometry_oracles import distances_to_triangles

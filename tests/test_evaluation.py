@@ -110,7 +110,7 @@ def test_cli_coverage(tmp_path, capsys):
 
 def test_cli_bad_input_exits_2(tmp_path, capsys):
     bad_tank = tmp_path / "tank.toml"
-    bad_tank.write_text("[window]\nwidth = 5.0\n")
+    bad_tank.write_text("water_depth = 2.0\n[end_wall]\nwidth = 2.4\n[window]\nwidth = 5.0\n")
     tasks = tmp_path / "tasks.json"
     save_tasks(tasks, np.array([[-1.0, 0.0, 1.0, 1.0, 0.0, 0.0]]))
     assert main(["coverage", str(tasks), "--tank", str(bad_tank)]) == 2

@@ -127,7 +127,7 @@ def test_cli_parameters_reach_discovery(tmp_path, keyframe, capsys):
     loose = json.loads(capsys.readouterr().out)
     main(["discover", str(mesh), "--json"])
     default = json.loads(capsys.readouterr().out)
-    assert loose["params"]["r_ex"] == 0.5
+    assert loose["params"]["r_ex_m"] == 0.5
     assert loose["counts"]["final"] > default["counts"]["final"]
 
 

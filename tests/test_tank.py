@@ -83,6 +83,19 @@ def test_ladder_stands_off_the_end_wall_right_of_centre():
 )
 def test_bad_configs_get_a_clear_error(document, message):
     with pytest.raises(TankConfigError, match=message):
+        tank_config_from_dict({"water_depth": 2.0, "end_wall": {"width": 2.4}, **document})
+
+
+@pytest.mark.parametrize(
+    "document, message",
+    [
+        ({}, "empty"),
+        ({"end_wall": {"width": 2.4}}, "no water_depth"),
+        ({"water_depth": 2.0}, "no \\[end_wall\\]"),
+    ],
+)
+def test_a_tank_without_its_size_is_refused(document, message):
+    with pytest.raises(TankConfigError, match=message):
         tank_config_from_dict(document)
 
 

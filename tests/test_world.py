@@ -243,9 +243,12 @@ def test_sim_cli_prints_the_final_state(tmp_path, capsys):
     )
     assert code == 0
     result = json.loads(capsys.readouterr().out)
-    assert set(result) >= {"position", "velocity_body", "rpy", "sim_time_s", "steps_per_s", "realtime_factor"}
+    assert set(result) >= {"robots", "sim_time_s", "steps_per_s", "realtime_factor"}
+    rov0 = result["robots"]["rov0"]
+    assert set(rov0) >= {"position_m", "velocity_body_m_s", "rpy_rad", "rpy_deg", "contacts"}
     assert result["sim_time_s"] == pytest.approx(1.0, abs=0.03)
-    assert result["velocity_body"][0] > 0.3
+    assert rov0["velocity_body_m_s"][0] > 0.3
+    assert rov0["contacts"] == []  # 1 s at half surge does not reach the wall 1.5 m ahead
     assert len(list(tmp_path.glob("rov0_*.png"))) == 2
     assert result["water_backend"] == "cpu"
     with pytest.raises(SystemExit):

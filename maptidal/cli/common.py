@@ -1,0 +1,203 @@
+"""What every ``maptidal`` subcommand shares: its argument parser class, checked argument types,
+output-path checks made before any work, and the discovery and coverage option groups."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from pathlib import Path
+
+from maptidal.discovery import DiscoveryParams
+
+EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+
+class RunError(Exception):
+    """A run that could not go on (the physics diverged, a renderer is missing): one line, exit 2."""
+
+
+class UsageError(Exception):
+    """A command line that does not parse; the message is the one line to print."""
+
+
+class Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose usage errors are one line (``maptidal sim: error: ...``), exit status 2.
+
+    It raises :class:`UsageError` for :func:`maptidal.cli.main` to print and return 2, rather than
+    exiting from inside the parser.
+    """
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        """Raise the one-line usage error naming the command and the problem."""
+        raise UsageError(f"{self.prog}: error: {message} (see {self.prog} --help)")
+
+
+def finite_float(text: str) -> float:
+    """An argparse type: a finite number (no nan or inf; 1e308 passes here and is range-checked later)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a finite number > 0."""
+    value = finite_float(text)
+    if value <= 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be greater than 0")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: a whole number >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} must be at least 1")
+    return value
+
+
+def _nearest_existing(path: Path) -> Path:
+    probe = path
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    return probe
+
+
+def _check_writable_parent(path: Path, shown: str) -> None:
+    base = _nearest_existing(path.parent)
+    if not base.is_dir():
+        raise argparse.ArgumentTypeError(f"cannot write {shown}: {base} is a file, not a folder")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"cannot write {shown}: no permission to write in {base}")
+
+
+def output_file(suffixes: tuple[str, ...] = ()):
+    """An argparse type for a file to write: not a folder, in a writable place, with one of ``suffixes``."""
+
+    def check(text: str) -> Path:
+        path = Path(text)
+        if suffixes and path.suffix.lower() not in suffixes:
+            raise argparse.ArgumentTypeError(
+                f"{text!r} must end in {' or '.join(suffixes)} (that is the format written)"
+            )
+        if path.is_dir():
+            raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file name")
+        _check_writable_parent(path, repr(text))
+        return path
+
+    return check
+
+
+def output_dir(text: str) -> Path:
+    """An argparse type for a folder to write into: a folder or nothing yet, in a writable place."""
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is a file; give a folder")
+    if path.exists():
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise argparse.ArgumentTypeError(f"cannot write into {text!r}: no permission")
+    else:
+        _check_writable_parent(path, repr(text))
+    return path
+
+
+PNG_FILE = output_file((".png",))
+JSON_FILE = output_file((".json",))
+
+
+def add_discovery_params(parser: argparse.ArgumentParser) -> None:
+    """The discovery parameters (defaults: the paper's best values and the OAK-D's field of view)."""
+    defaults = DiscoveryParams()
+    group = parser.add_argument_group("discovery parameters (defaults: the paper's best values)")
+    options = (
+        (
+            "--standoff",
+            defaults.standoff,
+            "M",
+            "L_i, CIP distance from the surface, in (0, 100] (default %s m)",
+        ),
+        ("--r-ex", defaults.r_ex, "M", "radius of exclusion, in (0, 100] (default %s m)"),
+        ("--theta-ex", defaults.theta_ex, "RAD", "angle of exclusion, in (0, pi] (default %s rad)"),
+        ("--threshold", defaults.threshold, "T", "keypoint score to confirm a CIP, in [0, 1] (default %s)"),
+        ("--p-s", defaults.p_s, "P", "self-pruning scale of r_ex and theta_ex, in (0, 1] (default %s)"),
+        ("--hfov-deg", defaults.hfov_deg, "DEG", "camera horizontal field of view (default %.1f deg, OAK-D)"),
+        ("--vfov-deg", defaults.vfov_deg, "DEG", "camera vertical field of view (default %.1f deg, OAK-D)"),
+    )
+    for flag, default, metavar, text in options:
+        group.add_argument(flag, type=finite_float, default=default, metavar=metavar, help=text % default)
+    group.add_argument(
+        "--range",
+        dest="range_m",
+        type=finite_float,
+        default=None,
+        metavar="M",
+        help="frustum far plane, in (0, 100] m (default 2 x standoff)",
+    )
+
+
+def discovery_params_from(args: argparse.Namespace) -> DiscoveryParams:
+    """The :class:`DiscoveryParams` the parsed options describe (raises DiscoveryInputError if bad)."""
+    return DiscoveryParams(
+        standoff=args.standoff,
+        r_ex=args.r_ex,
+        theta_ex=args.theta_ex,
+        threshold=args.threshold,
+        p_s=args.p_s,
+        hfov_deg=args.hfov_deg,
+        vfov_deg=args.vfov_deg,
+        range_m=args.range_m,
+    )
+
+
+def add_coverage_args(parser: argparse.ArgumentParser) -> None:
+    """The coverage model's options: tank, voxel size, far plane and occlusion."""
+    from maptidal.coverage import CoverageParams
+
+    defaults = CoverageParams()
+    group = parser.add_argument_group("coverage model")
+    group.add_argument(
+        "--tank",
+        metavar="CONFIG",
+        help="tank config TOML (default: the bundled OSB tank, osb_tank/tank.toml)",
+    )
+    group.add_argument(
+        "--voxel",
+        type=positive_float,
+        default=defaults.voxel_m,
+        metavar="M",
+        help="voxel size (default %(default)s m; at most a million voxels)",
+    )
+    group.add_argument(
+        "--far",
+        type=positive_float,
+        default=defaults.far_m,
+        metavar="M",
+        help="frustum far plane, in (0, 100] (default %(default)s m)",
+    )
+    group.add_argument(
+        "--occlusion",
+        action="store_true",
+        help="count a voxel only when the ray to it is unblocked (the paper does not)",
+    )
+
+
+def coverage_params_from(args: argparse.Namespace, discovery: DiscoveryParams | None = None):
+    """The :class:`maptidal.coverage.CoverageParams` of the parsed options, with discovery's camera."""
+    from maptidal.coverage import CoverageParams
+
+    camera = discovery or DiscoveryParams()
+    return CoverageParams(
+        voxel_m=args.voxel,
+        far_m=args.far,
+        hfov_deg=camera.hfov_deg,
+        vfov_deg=camera.vfov_deg,
+        occlusion=args.occlusion,
+    )

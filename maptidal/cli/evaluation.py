@@ -1,0 +1,169 @@
+"""``maptidal coverage``, ``compare`` and ``sweep``: the paper's coverage evaluation (Sec. IV)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+from maptidal.cli.common import (
+    add_coverage_args,
+    add_discovery_params,
+    coverage_params_from,
+    discovery_params_from,
+    output_dir,
+    positive_int,
+)
+
+
+def register(commands) -> None:
+    """Add the ``coverage``, ``compare`` and ``sweep`` subcommands."""
+    coverage = commands.add_parser(
+        "coverage",
+        help="views per voxel of a task list on the tank model",
+        description="Voxelise the tank's evaluated walls and count, per voxel, the viewpoints whose camera "
+        "frustum contains it (paper Sec. IV.B); report % uninspected, mean views and MAD against the ideal "
+        "gamma distribution (alpha 4, beta 2/3).",
+    )
+    coverage.add_argument("tasks", metavar="TASKS.json", help="viewpoints ({'tasks': [...]}, m)")
+    add_coverage_args(coverage)
+    coverage.add_argument("--json", action="store_true", help="print the full report as JSON")
+    coverage.add_argument(
+        "--plot-dir", type=output_dir, metavar="DIR", help="write histogram.png, voxels.png, coverage.json"
+    )
+    coverage.set_defaults(handler=run_coverage)
+
+    compare = commands.add_parser(
+        "compare",
+        help="Map-TIDAL vs Voronoi vs boustrophedon on the tank (what `make run` runs)",
+        description="Run Map-TIDAL on synthetic exploration keyframes of the tank, and the Voronoi and "
+        "boustrophedon baselines, score all three on the same voxels, print the paper's comparison table "
+        "and write compare.json, tasks, plots and report.md. `make run` runs this.",
+    )
+    add_coverage_args(compare)
+    compare.add_argument(
+        "--seed", type=int, default=0, help="seed of keyframes and Voronoi (default %(default)s)"
+    )
+    compare.add_argument("--json", action="store_true", help='print {"methods": {...}} as JSON')
+    compare.add_argument(
+        "--out",
+        type=output_dir,
+        default=Path("runs/compare"),
+        metavar="DIR",
+        help="output folder (default %(default)s)",
+    )
+    compare.add_argument("--no-write", action="store_true", help="write no files, only print")
+    compare.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    add_discovery_params(compare)
+    compare.set_defaults(handler=run_compare)
+
+    sweep = commands.add_parser(
+        "sweep",
+        help="Map-TIDAL over a grid of t, r_ex and theta_ex (Table I)",
+        description="Evaluate Map-TIDAL's coverage for every combination of the grid, in parallel local "
+        "processes; writes sweep.csv, sweep.md (Table I's layout) and sweep.png (heatmaps).",
+    )
+    sweep.add_argument(
+        "--grid",
+        nargs="+",
+        metavar="NAME=V1,V2",
+        help="grid values (t unitless, r_ex in m, theta_ex in rad); "
+        "default t=0.70,0.75,0.80 r_ex=1.5,1.6,1.7,1.8 theta_ex=0.25,0.3",
+    )
+    sweep.add_argument(
+        "--out",
+        type=output_dir,
+        default=Path("runs/sweep"),
+        metavar="DIR",
+        help="output folder (default %(default)s)",
+    )
+    sweep.add_argument(
+        "--jobs",
+        type=positive_int,
+        default=1,
+        metavar="N",
+        help="local processes, at most the grid size and the CPU count (default %(default)s)",
+    )
+    sweep.add_argument("--seed", type=int, default=0, help="seed of the keyframes (default %(default)s)")
+    sweep.add_argument("--no-plots", action="store_true", help="skip the heatmap PNG")
+    add_coverage_args(sweep)
+    add_discovery_params(sweep)
+    sweep.set_defaults(handler=run_sweep)
+
+
+def run_coverage(args: argparse.Namespace) -> int:
+    """Handler of ``maptidal coverage``."""
+    from maptidal.coverage import CoverageModel
+    from maptidal.files import atomic_write_json, load_tasks
+    from maptidal.tank import TankModel, load_tank_config
+
+    params = coverage_params_from(args)
+    tasks = load_tasks(args.tasks)
+    tank = TankModel(load_tank_config(args.tank))
+    model = CoverageModel.from_tank(tank, params)
+    report, views = model.evaluate(tasks)
+    document = {"tank": tank.config.name, **report.to_dict()}
+    if args.plot_dir:
+        from maptidal.coverage_plots import plot_histograms, plot_voxel_views
+
+        out = Path(args.plot_dir)
+        name = Path(args.tasks).name
+        plot_histograms({"tasks": report}, out / "histogram.png", title=f"{name} on {tank.config.name}")
+        plot_voxel_views(model.voxels, views, tasks, out / "voxels.png", title=name, tank=tank)
+        atomic_write_json(out / "coverage.json", document)
+    if args.json:
+        print(json.dumps(document))
+    else:
+        print(
+            f"{report.n_viewpoints} viewpoints, {report.n_voxels} voxels: "
+            f"{report.pct_uninspected:.2f}% uninspected, "
+            f"{report.mean_views:.2f} mean views, MAD {report.mad:.4f}"
+        )
+    return 0
+
+
+def _evaluation_config(args: argparse.Namespace):
+    from maptidal.evaluation import EvaluationConfig
+
+    discovery = discovery_params_from(args)
+    return EvaluationConfig(
+        tank_path=args.tank,
+        seed=args.seed,
+        coverage=coverage_params_from(args, discovery),
+        discovery=discovery,
+    )
+
+
+def run_compare(args: argparse.Namespace) -> int:
+    """Handler of ``maptidal compare``."""
+    from maptidal.evaluation import comparison_table, run_compare
+
+    out = None if args.no_write else args.out
+    document = run_compare(out, _evaluation_config(args), plots=not args.no_plots, progress=not args.json)
+    if args.json:
+        print(json.dumps({"methods": document["methods"]}))
+        return 0
+    print(comparison_table(document["methods"]))
+    ordering = ", ".join(f"{k}: {v}" for k, v in document["ordering_as_paper"].items())
+    print(f"paper's ordering holds: {ordering}")
+    if out:
+        print(f"report: {Path(out) / 'report.md'}")
+    return 0
+
+
+def run_sweep(args: argparse.Namespace) -> int:
+    """Handler of ``maptidal sweep``."""
+    from maptidal.evaluation import grid_size, parse_grid, run_sweep, sweep_markdown
+
+    grid = parse_grid(args.grid or [])
+    jobs = min(args.jobs, grid_size(grid), os.cpu_count() or 1)
+    if jobs < args.jobs:
+        print(f"maptidal sweep: using {jobs} processes (grid size and CPU count)", file=sys.stderr)
+    plots = not args.no_plots
+    rows = run_sweep(args.out, grid, _evaluation_config(args), jobs=jobs, plots=plots)
+    print(sweep_markdown(rows))
+    files = ["sweep.csv", "sweep.md"] + (["sweep.png"] if plots else [])
+    print(f"files in {args.out}: {', '.join(files)}")
+    return 0
