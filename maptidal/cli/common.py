@@ -84,12 +84,12 @@ def output_file(suffixes: tuple[str, ...] = ()):
 
     def check(text: str) -> Path:
         path = Path(text)
+        if path.is_dir():
+            raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file name")
         if suffixes and path.suffix.lower() not in suffixes:
             raise argparse.ArgumentTypeError(
                 f"{text!r} must end in {' or '.join(suffixes)} (that is the format written)"
             )
-        if path.is_dir():
-            raise argparse.ArgumentTypeError(f"{text!r} is a folder; give a file name")
         _check_writable_parent(path, repr(text))
         return path
 
