@@ -13,7 +13,7 @@ thruster commands in [-1, 1] exactly as ArduSub's AP_Motors6DOF does
   yaw/forward/lateral are mixed separately; each group is divided by its largest
   absolute value when that exceeds 1, then the two are summed and clipped.
 
-The factors are ArduSub's (../shared/reference/bluerov2.md). They are normalised
+The factors are ArduSub's (ArduPilot's AP_Motors6DOF.cpp; docs/references.md). They are normalised
 mixing factors, not physics: :func:`allocation_matrix` builds the physical map from
 thruster forces to body wrench from positions and directions.
 """

@@ -33,6 +33,7 @@ from envs.vehicle import VehicleParams
 from envs.world import RobotPlacement, build_robot_spec, build_tank_spec, compose
 from maptidal.camera import StereoCameraParams
 from maptidal.files import atomic_write_bytes, atomic_write_text
+from maptidal.paths import asset
 
 _README = """# Exported maptidal world: {name}
 
@@ -96,7 +97,7 @@ def write_asset_robots(folder: str | os.PathLike | None = None) -> list[Path]:
     """(Re)write assets/bluerov2/bluerov2_<frame>.xml for both frames; returns the paths."""
     from envs.vehicle import FRAMES, load_vehicle
 
-    folder = Path(folder) if folder else Path(__file__).resolve().parent.parent / "assets" / "bluerov2"
+    folder = Path(folder) if folder else asset("bluerov2")
     return [
         atomic_write_text(
             folder / f"bluerov2_{frame}.xml", ROBOT_FILE_HEADER + robot_xml(load_vehicle(frame))

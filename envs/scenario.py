@@ -19,9 +19,9 @@ from envs.sensors import SENSORS, SensorNoise
 from envs.vehicle import FRAMES, VehicleConfigError, VehicleParams, load_vehicle
 from envs.water import WaterParams
 from maptidal.checks import check_keys, finite_vector, require
+from maptidal.paths import ASSETS
 from maptidal.tank import DEFAULT_TANK_CONFIG, TankConfigError, TankModel, load_tank_config
 
-ASSETS = Path(__file__).resolve().parent.parent / "assets"
 SCENARIO_DIR = ASSETS / "scenarios"
 DEFAULT_SCENARIO = SCENARIO_DIR / "default.toml"
 HULL_MARGIN_M = 0.3  # a start pose must leave this much water around the CG

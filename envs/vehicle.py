@@ -15,7 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-VEHICLE_FILE = Path(__file__).resolve().parent.parent / "assets" / "bluerov2" / "bluerov2.toml"
+from maptidal.paths import asset
+
+VEHICLE_FILE = asset("bluerov2", "bluerov2.toml")
 FRAMES = ("standard", "heavy")
 
 

@@ -2,7 +2,7 @@
 
 Ruediger & Banerjee, "Mapping-Guided Task Discovery and Allocation for Cooperative
 Robotic Inspection of Underwater Structures", Section III.B and Algorithms 1-3
-(../shared/paper/maptidal.tex). Discovery runs once per keyframe mesh:
+(Ruediger & Banerjee; docs/references.md). Discovery runs once per keyframe mesh:
 
 1. **Generate Points** (Alg. 3): one candidate inspection point (CIP) per mesh face,
    at ``centroid + L_i * n`` looking along ``-n``, where ``n`` is the unit face

@@ -26,7 +26,9 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-DEFAULT_TANK_CONFIG = Path(__file__).resolve().parent.parent / "assets" / "osb_tank" / "tank.toml"
+from maptidal.paths import asset
+
+DEFAULT_TANK_CONFIG = asset("osb_tank", "tank.toml")
 
 
 class TankConfigError(ValueError):

@@ -114,3 +114,20 @@ def test_scenario_files_load(tmp_path):
     path.write_text(json.dumps(_minimal()))
     scenario = load_scenario(path)
     assert [r.name for r in scenario.robots] == ["r0", "r1"] and len(scenario.tasks) == 1
+
+
+def test_example_scenarios_are_in_the_tank_and_as_generated():
+    from envs.scenario import inside_tank
+    from maptidal.allocation.examples import example_scenarios, scenario_text
+    from maptidal.tank import TankModel
+
+    tank = TankModel()
+    for name, document in example_scenarios(tank).items():
+        assert (SCENARIOS / name).read_text() == scenario_text(document), (
+            "run python -m maptidal.allocation.examples"
+        )
+        robots = document["robots"] + [e["robot"] for e in document.get("events", []) if e["kind"] == "join"]
+        for robot in robots:
+            assert inside_tank(tank, robot["position"], 0.3), (name, robot)
+        for task in document["tasks"]:
+            assert inside_tank(tank, task["position"], 0.0), (name, task)

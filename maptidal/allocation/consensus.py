@@ -1,6 +1,6 @@
 """CBBA conflict resolution: what a receiver does with one sender's view of a set of tasks.
 
-This is the table of Choi, Brunet & How (2009), Table 1, as listed in ../shared/reference/cbba.md. i is
+This is the table of Choi, Brunet & How (2009), Table 1, as listed in docs/references.md. i is
 the receiver, k the sender, m and n any other robots. `table_action` states the table one row at a time;
 `resolve` applies it to many tasks at once through a lookup built from `table_action`. Winners are robot
 indices, NO_WINNER (-1) for none. Bid ties go to the lower robot index wherever the table compares bids.

@@ -1,7 +1,7 @@
 """Centralised sequential greedy allocation: the yardstick for CBBA.
 
 With bids that diminish along a bundle (which bid warping guarantees), CBBA on a connected network
-converges to exactly this assignment (Choi, Brunet & How 2009, ../shared/reference/cbba.md): repeatedly
+converges to exactly this assignment (Choi, Brunet & How 2009, docs/references.md): repeatedly
 give the single best (robot, task) pair, by the same warped bids, to that robot. It shares the bid and
 tie rules with the agents (maptidal.allocation.scoring), so the comparison is exact.
 """

@@ -16,8 +16,8 @@ Shape (every key; only robots and tasks are required):
                 {"time_s": 900, "kind": "join", "robot": {"id": "r9", "position": [x, y, z]}},
                 {"time_s": 1600, "kind": "done", "robot": "r0", "task": "t3"}]}
 
-A task without discovered_by is part of the mission plan every starting robot knows; one with
-discovered_by appears on that robot at time_s and spreads with the auction. bundle_limit 0 means no
+An optional "about" key holds free text. A task without discovered_by is part of the mission plan
+every starting robot knows; one with discovered_by appears on that robot at time_s and spreads with the auction. bundle_limit 0 means no
 limit. Anything malformed raises AllocationScenarioError naming the value.
 """
 
@@ -125,6 +125,7 @@ def scenario_from_dict(document) -> AllocationScenario:
     """Build and validate an AllocationScenario from a parsed JSON document."""
     _req(isinstance(document, dict), "an auction scenario must be a JSON object")
     allowed = {"robots", "tasks", "channel", "bundle_limit", "task_value", "timing", "max_time_s", "events"}
+    allowed.add("about")  # free text describing the scenario
     check_keys(document, allowed, "the scenario", AllocationScenarioError)
     robots_doc, tasks_doc = document.get("robots"), document.get("tasks", [])
     _req(isinstance(robots_doc, list) and robots_doc, "robots must be a non-empty list")

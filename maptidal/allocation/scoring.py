@@ -5,7 +5,7 @@ travel it costs when inserted at the best position of the robot's current path (
 robot's position). Travel is priced per robot: time at the robot's speed plus an optional energy term
 per metre. That marginal score is NOT diminishing in the bundle (a task next to one already won gets
 cheaper), and CBBA's convergence proof needs diminishing marginal gain (Choi, Brunet & How 2009,
-../shared/reference/cbba.md). Bid warping restores it: each new bid is capped at the smallest bid already
+docs/references.md). Bid warping restores it: each new bid is capped at the smallest bid already
 in the bundle, so the bids along a bundle never increase and the auction converges to the same
 assignment as a centralised sequential greedy allocation on the same (warped) bids.
 

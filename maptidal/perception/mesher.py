@@ -1,6 +1,6 @@
 """Kimera-style per-keyframe mesh: 2D Delaunay on pixels, lifted to 3D landmarks.
 
-Follows ../shared/reference/kimera_mesher.md, steps 1-4 and the orientation note:
+Follows Kimera-VIO's Mesher (docs/references.md), steps 1-4 and the orientation note:
 
 1. the vertices are the keypoints that have a 3D landmark;
 2. OpenCV Subdiv2D triangulates their pixels over the image rectangle, and only
@@ -24,7 +24,7 @@ import numpy as np
 
 @dataclass(frozen=True)
 class MesherParams:
-    """Bad-triangle thresholds; defaults are Kimera's shipped configs (reference notes)."""
+    """Bad-triangle thresholds; defaults are Kimera's shipped configs (docs/references.md)."""
 
     min_ratio_largest_smallest_side: float = 0.2
     min_elongation_ratio: float = 0.2

@@ -9,7 +9,7 @@ Baselines, both measured in this process:
   sizes where it finishes in reasonable time;
 - the sequential greedy itself (what a centralised planner with all information would spend).
 Issue #5's external reference: a public Python CBBA port takes about 3.1 s at 20x100 and 20 s at 20x200
-on this kind of machine (../shared/reference/cbba.md); the goal is 10x faster at 20x100.
+on this kind of machine (docs/references.md); the goal is 10x faster at 20x100.
 
 Run: ``make bench`` or ``python tests/bench/bench_allocation.py [--repeats N]``.
 """

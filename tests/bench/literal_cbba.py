@@ -5,7 +5,7 @@ every round, as in Choi, Brunet & How (2009). Scores are the same path-insertion
 warping as maptidal.allocation, and the same bundle re-check (a robot releases its bundle from the first
 entry that is no longer its best choice), but every quantity is computed with plain Python loops over
 tasks and insertion positions, and the conflict table is written out case by case from
-../shared/reference/cbba.md, independently of maptidal.allocation.consensus.
+docs/references.md, independently of maptidal.allocation.consensus.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ NONE = None  # "no winner" is None here, never 0 (agent 0 exists)
 
 
 def literal_action(i, k, z_i, y_i, z_k, y_k, s_i: dict, s_k: dict) -> str:
-    """The table of ../shared/reference/cbba.md for one task: 'update', 'reset' or 'leave'."""
+    """The table of docs/references.md for one task: 'update', 'reset' or 'leave'."""
 
     def newer(m):
         return s_k.get(m, -1) > s_i.get(m, -1)

@@ -1,7 +1,7 @@
 """A literal, line-by-line transcription of the paper's Algorithms 1-3.
 
 Ruediger & Banerjee, Map-TIDAL, Algorithms 1 (Task Discovery Process), 2 (Pruning)
-and 3 (Additional Functions), ../shared/paper/maptidal.tex. Python lists and
+and 3 (Additional Functions), the paper (docs/references.md). Python lists and
 loops, one scipy Delaunay per CIP, nothing clever: it is the oracle that the
 vectorised maptidal.discovery is tested and benchmarked against. It shares no
 code with maptidal.discovery.

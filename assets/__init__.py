@@ -1,0 +1,1 @@
+"""maptidal's bundled data (tank, robots, scenarios), installed as ``maptidal.assets``; see maptidal/paths.py."""

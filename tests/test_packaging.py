@@ -1,0 +1,98 @@
+"""A non-editable install runs: the wheel carries the bundled data (tank, robots, scenarios) and every
+package, and `maptidal compare` and `maptidal sim` work from it in a fresh virtual environment."""
+
+import json
+import os
+import subprocess
+import sys
+import sysconfig
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_every_package_of_the_source_tree_is_in_the_wheel_list():
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {
+        ".".join(init.parent.relative_to(ROOT).parts)
+        for top in ("maptidal", "envs", "controllers")
+        for init in (ROOT / top).rglob("__init__.py")
+    }
+    assert found <= listed, f"add {sorted(found - listed)} to [tool.setuptools] packages"
+
+
+def test_wheel_installed_in_a_fresh_venv_runs_compare_and_sim(tmp_path):
+    wheels = tmp_path / "wheels"
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            str(wheels),
+            str(ROOT),
+        ],
+        check=True,
+        capture_output=True,
+    )
+    (wheel,) = wheels.glob("maptidal-*.whl")
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
+    python = venv / "bin" / "python"
+    site = Path(
+        subprocess.run(
+            [python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
+    )
+    # the dependencies come from this environment's site-packages (a .pth line does not run the .pth
+    # files there, so this project's editable install stays out); maptidal itself only from the wheel
+    (site / "dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "-q",
+            "--no-deps",
+            "--no-index",
+            "--target",
+            str(site),
+            str(wheel),
+        ],
+        check=True,
+        capture_output=True,
+    )
+    work = tmp_path / "elsewhere"  # not the source tree: assets must come from the install
+    work.mkdir()
+    environment = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "PYTHONNOUSERSITE": "1"}
+    environment.pop("PYTHONPATH", None)
+
+    def maptidal(*argv: str) -> dict:
+        completed = subprocess.run(
+            [python, "-m", "maptidal.cli", *argv], cwd=work, env=environment, capture_output=True, text=True
+        )
+        assert completed.returncode == 0, completed.stderr
+        return json.loads(completed.stdout)
+
+    where = subprocess.run(
+        [python, "-c", "import maptidal, maptidal.paths as p; print(maptidal.__file__); print(p.ASSETS)"],
+        cwd=work,
+        env=environment,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split()
+    assert all(line.startswith(str(site)) for line in where), where
+    compare = maptidal("compare", "--no-write", "--json")
+    assert set(compare["methods"]) == {"maptidal", "voronoi", "boustrophedon"}
+    sim = maptidal("sim", "--duration", "0.2", "--json")
+    assert set(sim["robots"]) == {"rov0"}
