@@ -144,8 +144,9 @@ def plot_sweep_heatmaps(rows: list[dict], path: str | os.PathLike) -> None:
             values = np.array([[lookup[(t, r, angle)][key] for r in radii] for t in thresholds], dtype=float)
             axes = grid[i, j]
             low, high = float(values.min()), float(values.max())
-            if high - low < 1e-12:  # a flat panel (say 0 % uninspected everywhere): centre its one colour
-                low, high = low - max(1.0, abs(low)) * 0.5, high + max(1.0, abs(high)) * 0.5
+            flat = high - low < 1e-12
+            if flat:  # one value everywhere (say 0 % uninspected): a scale from 0 that shows where it sits
+                low, high = min(0.0, low), max(0.0, high) + 0.1 * max(1.0, abs(high))
             image = axes.imshow(values, cmap=cmap, aspect="auto", vmin=low, vmax=high)
             for a in range(len(thresholds)):
                 for b in range(len(radii)):
@@ -157,7 +158,7 @@ def plot_sweep_heatmaps(rows: list[dict], path: str | os.PathLike) -> None:
             axes.set_yticks(range(len(thresholds)), [f"{t:g}" for t in thresholds])
             axes.set_xlabel("r_ex (m)")
             axes.set_ylabel("t")
-            axes.set_title(f"{label}, theta_ex = {angle:g}", fontsize=9)
+            axes.set_title(f"{label}, theta_ex = {angle:g}" + (" (all equal)" if flat else ""), fontsize=9)
             figure.colorbar(image, ax=axes, shrink=0.8)
     figure.tight_layout()
     _save(figure, path)

@@ -324,3 +324,25 @@ def test_cameras_do_not_see_another_robots_dvl_beams(backend):
     assert not option.flags[mujoco.mjtVisFlag.mjVIS_RANGEFINDER]
     assert not option.sitegroup.any() and option.frame == mujoco.mjtFrame.mjFRAME_NONE
     assert not option.flags[mujoco.mjtVisFlag.mjVIS_CONTACTPOINT]
+
+
+def test_rendered_window_has_the_oak_d_focal_length_and_square_pixels():
+    # Luxonis' OAK-D spec sheet: 2.35 mm focal length, 3 um pixels binned 2 x 2 at 640 x 400
+    focal_px = 2.35e-3 / 6e-6
+    distance, window = 1.2, WindowConfig(width=1.0, height=0.6, centre_height=1.0)
+    tank = TankModel(TankConfig(window=window, ladder=LadderConfig(rails=0)))
+    vehicle = load_vehicle("heavy")
+    camera = np.asarray(vehicle.sensors.camera_position)
+    spec = RobotSpec("rov", vehicle, (-distance - camera[0], 0.0, window.centre_height - camera[2]))
+    sim = Simulation(Scenario("window", tank, (spec,), water=WaterParams(enabled=False), noise=QUIET))
+    # the left camera sits half a baseline to the left: look at the right camera's centred view too
+    for side, image in zip(
+        ("left", "right"), sim.render_stereo("rov", depth=True, water=False)[2:], strict=True
+    ):
+        opening = image > distance + 0.01  # the recess behind the wall plane
+        rows, cols = np.flatnonzero(opening.any(axis=1)), np.flatnonzero(opening.any(axis=0))
+        width, height = cols[-1] - cols[0] + 1, rows[-1] - rows[0] + 1
+        assert width == pytest.approx(focal_px * window.width / (distance + 0.01), abs=2.5), side
+        assert height == pytest.approx(focal_px * window.height / (distance + 0.01), abs=2.5), side
+        assert width / height == pytest.approx(window.width / window.height, rel=0.02)
+    assert sim.intrinsics()["K"][0][0] == pytest.approx(focal_px) == sim.intrinsics()["K"][1][1]

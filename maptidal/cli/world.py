@@ -102,6 +102,7 @@ class _ContactLog:
         self.entries: dict[str, dict[str, dict]] = {robot: {} for robot in robots}
 
     def record(self, contacts, time_s: float) -> None:
+        """Add this control step's contacts (:meth:`envs.simulation.Simulation.contacts`)."""
         for contact in contacts:
             entry = self.entries[contact.robot].setdefault(
                 contact.other, {"with": contact.other, "first_s": time_s, "max_force_n": 0.0, "steps": 0}
@@ -111,6 +112,7 @@ class _ContactLog:
             entry["steps"] += 1
 
     def of(self, robot: str) -> list[dict]:
+        """The robot's contacts for the JSON: with what, first and last time (s), largest force (N)."""
         return [
             {**entry, "max_force_n": round(entry["max_force_n"], 3)} for entry in self.entries[robot].values()
         ]

@@ -22,7 +22,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco
 
 from envs import hydrodynamics
-from envs.rendering import describe_renderer
+from envs.rendering import CAMERA_SCENE_OPTION, describe_renderer
 from envs.scenario import RobotSpec, Scenario
 from envs.simulation import Simulation
 from envs.vehicle import load_vehicle
@@ -91,7 +91,8 @@ def bench_render(pairs: int, rounds: int = 10) -> dict[str, float]:
 
     def bare() -> None:
         for side in ("left", "right"):
-            renderer.update_scene(sim.data, camera=f"rov0/{side}")
+            # the cameras' own visual options (scene only), so that both draw the same picture
+            renderer.update_scene(sim.data, camera=f"rov0/{side}", scene_option=CAMERA_SCENE_OPTION)
             renderer.render()
 
     def with_noise(backend: str) -> None:
