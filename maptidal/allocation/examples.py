@@ -52,8 +52,8 @@ def example_scenarios(tank: TankModel | None = None) -> dict[str, dict]:
         task.update(id=f"found{k}", discovered_by=robot, time_s=time_s)
     return {
         "auction_2x20.json": {
-            HEADER_KEY: "Two robots, at most 10 tasks each, and the 20 Voronoi viewpoints of the OSB tank (tank frame, m); "
-            "written by maptidal.allocation.examples.",
+            HEADER_KEY: "Two robots, at most 10 tasks each, and the 20 Voronoi viewpoints of the OSB tank "
+            "(tank frame, m); written by maptidal.allocation.examples.",
             "robots": [
                 {"id": "r0", "position": [-1.5, 1.0, 1.0], "speed": 0.5, "capabilities": ["camera", "dvl"]},
                 {"id": "r1", "position": [-1.5, -1.0, 1.0], "speed": 0.5, "capabilities": ["camera", "dvl"]},

@@ -17,8 +17,9 @@ Shape (every key; only robots and tasks are required):
                 {"time_s": 1600, "kind": "done", "robot": "r0", "task": "t3"}]}
 
 An optional "about" key holds free text. A task without discovered_by is part of the mission plan
-every starting robot knows; one with discovered_by appears on that robot at time_s and spreads with the auction. bundle_limit 0 means no
-limit. Anything malformed raises AllocationScenarioError naming the value.
+every starting robot knows; one with discovered_by appears on that robot at time_s and spreads with
+the auction. bundle_limit 0 means no limit. Anything malformed raises AllocationScenarioError naming
+the value.
 """
 
 from __future__ import annotations
