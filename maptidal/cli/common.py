@@ -109,6 +109,17 @@ def output_dir(text: str) -> Path:
     return path
 
 
+def add_output_folder(parser: argparse.ArgumentParser, default: str) -> None:
+    """The ``--out DIR`` option of a command that writes a folder of results (checked before any work)."""
+    parser.add_argument(
+        "--out",
+        type=output_dir,
+        default=Path(default),
+        metavar="DIR",
+        help="output folder (default %(default)s)",
+    )
+
+
 PNG_FILE = output_file((".png",))
 JSON_FILE = output_file((".json",))
 

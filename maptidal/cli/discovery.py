@@ -10,8 +10,8 @@ from maptidal.cli.common import (
     JSON_FILE,
     PNG_FILE,
     add_discovery_params,
+    add_output_folder,
     discovery_params_from,
-    output_dir,
 )
 
 
@@ -46,13 +46,7 @@ def register(commands) -> None:
         "window and a ladder; writes each keyframe's mesh (frameNN.ply), its tasks, per-frame plots and "
         "a markdown report. (`make run` runs `maptidal compare`, not this.)",
     )
-    demo.add_argument(
-        "--out",
-        type=output_dir,
-        default=Path("runs/demo"),
-        metavar="DIR",
-        help="output folder (default %(default)s)",
-    )
+    add_output_folder(demo, "runs/demo")
     demo.add_argument(
         "--seed", type=int, default=0, help="random seed of the keyframes (default %(default)s)"
     )

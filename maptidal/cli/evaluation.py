@@ -11,6 +11,7 @@ from pathlib import Path
 from maptidal.cli.common import (
     add_coverage_args,
     add_discovery_params,
+    add_output_folder,
     coverage_params_from,
     discovery_params_from,
     output_dir,
@@ -47,13 +48,7 @@ def register(commands) -> None:
         "--seed", type=int, default=0, help="seed of keyframes and Voronoi (default %(default)s)"
     )
     compare.add_argument("--json", action="store_true", help='print {"methods": {...}} as JSON')
-    compare.add_argument(
-        "--out",
-        type=output_dir,
-        default=Path("runs/compare"),
-        metavar="DIR",
-        help="output folder (default %(default)s)",
-    )
+    add_output_folder(compare, "runs/compare")
     compare.add_argument("--no-write", action="store_true", help="write no files, only print")
     compare.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     add_discovery_params(compare)
@@ -72,13 +67,7 @@ def register(commands) -> None:
         help="grid values (t unitless, r_ex in m, theta_ex in rad); "
         "default t=0.70,0.75,0.80 r_ex=1.5,1.6,1.7,1.8 theta_ex=0.25,0.3",
     )
-    sweep.add_argument(
-        "--out",
-        type=output_dir,
-        default=Path("runs/sweep"),
-        metavar="DIR",
-        help="output folder (default %(default)s)",
-    )
+    add_output_folder(sweep, "runs/sweep")
     sweep.add_argument(
         "--jobs",
         type=positive_int,

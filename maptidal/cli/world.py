@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from maptidal.cli.common import RunError, output_dir, positive_float, positive_int
+from maptidal.cli.common import RunError, add_output_folder, output_dir, positive_float, positive_int
 from maptidal.files import atomic_write_bytes
 from maptidal.progress import ProgressBar
 
@@ -74,13 +74,7 @@ def register(commands) -> None:
         "--scenario", metavar="FILE", help="scenario TOML (default: the bundled default.toml)"
     )
     export.add_argument("--frame", choices=("heavy", "standard"), help="switch every robot to this frame")
-    export.add_argument(
-        "--out",
-        type=output_dir,
-        default=Path("runs/mjcf"),
-        metavar="DIR",
-        help="output folder (default %(default)s)",
-    )
+    add_output_folder(export, "runs/mjcf")
     export.set_defaults(handler=run_export)
 
 
