@@ -6,8 +6,9 @@
  * Per robot, in the body frame (x fwd, y left, z up; origin at the CG, principal axes):
  *   tau_other = tau_thrust - C_RB(nu) nu - C_A(nu_r) nu_r - D(nu_r) nu_r + g_b + b_b
  *   (C_A only where the robot's added_mass_coriolis flag, slot SLOT_CORIOLIS, is set)
- *   nudot     = tau_other / (M_RB + M_A)            (all diagonal)
- *   applied   = tau_thrust - C_A(nu_r) nu_r - D(nu_r) nu_r + b_b - M_A nudot
+ *   nudot     = (tau_other - M_A c) / (M_RB + M_A)  (all diagonal), c = [w x (R^T v_current); 0]
+ *   applied   = tau_thrust - C_A(nu_r) nu_r - D(nu_r) nu_r + b_b - M_A (nudot + c)
+ * (M_A acts on the relative acceleration nudot_r = nudot + c of a constant current.)
  * MuJoCo itself supplies gravity and the rigid-body Coriolis terms, so the body
  * moves as (M_RB + M_A) nudot = tau_other: added mass from the current step's
  * forces, never from the last step's acceleration. */
@@ -16,8 +17,10 @@
 
 #define MAGIC 4242.0
 #define HEADER 4
-#define BLOCK 84
+#define BLOCK 86
 #define SLOT_HULL 80     /* hull height (m), for the wet fraction */
+#define SLOT_HULL_LENGTH 83 /* hull length and width (m): the hull's vertical extent at any attitude */
+#define SLOT_HULL_WIDTH 84
 #define SLOT_THRUST_FADE 82 /* half-width (m) of a thruster's fade-out at the water surface */
 #define SLOT_CORIOLIS 81 /* 1: include C_A(nu_r) nu_r */
 #define MAX_THRUSTERS 8
@@ -84,9 +87,11 @@ void maptidal_hydro_passive(const mjModel* m, mjData* d) {
     cross(w, av, c1);  /* C_A nu_r, linear part:  w x (A_l v_r) */
     cross(vr, av, c2); /* C_A nu_r, angular part: v_r x (A_l v_r) + w x (A_r w) */
     cross(w, aw, c3);
-    /* buoyancy fades out linearly as the hull (height p[SLOT_HULL]) leaves the water */
-    mjtNum surface = d->userdata[3], hull = p[SLOT_HULL];
-    mjtNum wet = hull > 0 ? (surface - (d->xipos[3 * body + 2] - 0.5 * hull)) / hull : 1.0;
+    /* buoyancy fades out linearly as the hull leaves the water; the hull box spans cg_z +- h vertically,
+     * h = (|R20| L + |R21| W + |R22| H) / 2 at its attitude */
+    mjtNum surface = d->userdata[3];
+    mjtNum half = 0.5 * (fabs(R[6]) * p[SLOT_HULL_LENGTH] + fabs(R[7]) * p[SLOT_HULL_WIDTH] + fabs(R[8]) * p[SLOT_HULL]);
+    mjtNum wet = half > 0 ? (surface - (d->xipos[3 * body + 2] - half)) / (2 * half) : 1.0;
     buoyancy *= wet < 0 ? 0 : (wet > 1 ? 1 : wet);
     mjtNum fb[3] = {buoyancy * zb[0], buoyancy * zb[1], buoyancy * zb[2]}, mb[3];
     cross(cb, fb, mb);
@@ -101,12 +106,16 @@ void maptidal_hydro_passive(const mjModel* m, mjData* d) {
     mjtNum iw[3] = {inertia[0] * w[0], inertia[1] * w[1], inertia[2] * w[2]}, crb_l[3], crb_a[3];
     cross(w, v, crb_l);
     cross(w, iw, crb_a);
+    /* added mass acts on the relative acceleration: nudot_r = nudot + [w x (R^T v_c); 0] */
+    mjtNum vc[3] = {v[0] - vr[0], v[1] - vr[1], v[2] - vr[2]}, turn[3];
+    cross(w, vc, turn);
     mjtNum applied[6];
     for (int i = 0; i < 6; i++) {
       mjtNum rigid = i < 3 ? mass : inertia[i - 3];
-      mjtNum other = thrust[i] + hydro[i] + (i < 3 ? gb[i] - mass * crb_l[i] : -crb_a[i - 3]);
+      mjtNum current_turn = i < 3 ? turn[i] : 0.0;
+      mjtNum other = thrust[i] + hydro[i] + (i < 3 ? gb[i] - mass * crb_l[i] : -crb_a[i - 3]) - added[i] * current_turn;
       mjtNum nudot = other / (rigid + added[i]);
-      applied[i] = thrust[i] + hydro[i] - added[i] * nudot;
+      applied[i] = thrust[i] + hydro[i] - added[i] * (nudot + current_turn);
     }
     /* free joint: linear dofs take the world force, angular dofs the body torque */
     for (int i = 0; i < 3; i++) {

@@ -60,8 +60,12 @@ log = logging.getLogger(__name__)
 
 MAGIC = 4242.0
 HEADER = 4  # magic, number of robots, enabled flag, water surface height (m)
-BLOCK = 84  # doubles per robot
+BLOCK = 86  # doubles per robot
 SLOT_HULL = 80  # hull height (m), for the wet fraction near the surface
+SLOT_HULL_LENGTH = (
+    83  # hull length and width (m): with the height, the hull's vertical extent at any attitude
+)
+SLOT_HULL_WIDTH = 84
 SLOT_CORIOLIS = 81  # 1.0: include C_A(nu_r) nu_r
 SLOT_THRUST_FADE = 82  # half-width (m) of a thruster's fade-out at the water surface
 MAX_THRUSTERS = 8
@@ -115,6 +119,7 @@ def pack_userdata(
         layout = np.hstack([vehicle.thruster_positions, vehicle.thruster_directions]).ravel()
         block[31 : 31 + len(layout)] = layout
         block[SLOT_HULL] = vehicle.hull_size[2]
+        block[SLOT_HULL_LENGTH], block[SLOT_HULL_WIDTH] = vehicle.hull_size[:2]
         block[SLOT_CORIOLIS] = 1.0 if vehicle.added_mass_coriolis else 0.0
         block[SLOT_THRUST_FADE] = vehicle.thruster.surface_fade_m
         userdata[HEADER + k * BLOCK : HEADER + (k + 1) * BLOCK] = block
@@ -129,6 +134,19 @@ def thruster_forces(act: np.ndarray, max_forward_n: float, max_reverse_n: float)
     """Thrust (N) of each thruster from its lagged command in [-1, 1] (T200 asymmetry)."""
     act = np.asarray(act, float)
     return np.where(act >= 0.0, act * max_forward_n, act * max_reverse_n)
+
+
+def hull_wet_fraction(hull_size, rotation: np.ndarray, cg_z: float, surface_z: float) -> float:
+    """How much of the hull is under water, from its vertical extent at its attitude: 1 submerged, 0 out.
+
+    The hull is a box (length, width, height) about the CG; rotated by ``rotation`` (body to world) it
+    spans ``cg_z +- h`` with ``h = (|R20| L + |R21| W + |R22| H) / 2``, so a vehicle on its side near the
+    surface is judged by its width, not its upright height.
+    """
+    half = 0.5 * float(np.abs(np.asarray(rotation)[2]) @ np.asarray(hull_size, float))
+    if half <= 0:
+        return 1.0
+    return float(np.clip((surface_z - (cg_z - half)) / (2.0 * half), 0.0, 1.0))
 
 
 def thruster_wet_fractions(
@@ -184,9 +202,12 @@ def body_wrench(
     rigid = vehicle.rigid_body_mass()
     gravity_b = vehicle.mass * R.T @ np.asarray(gravity, float)
     coriolis = np.concatenate([vehicle.mass * np.cross(w, v), np.cross(w, rigid[3:] * w)])
-    other = thrust + hydro + np.concatenate([gravity_b, np.zeros(3)]) - coriolis
+    # added mass acts on the relative acceleration: nudot_r = nudot + [w x (R^T v_c); 0] for a constant
+    # current seen from a turning body
+    current_turn = np.concatenate([np.cross(w, R.T @ current), np.zeros(3)])
+    other = thrust + hydro + np.concatenate([gravity_b, np.zeros(3)]) - coriolis - added * current_turn
     nudot = other / (rigid + added)
-    return thrust + hydro - added * nudot
+    return thrust + hydro - added * (nudot + current_turn)
 
 
 def _robots_in(userdata: np.ndarray):
@@ -205,8 +226,8 @@ def passive_forces(model: mujoco.MjModel, data: mujoco.MjData) -> None:
         layout = block[31 : 31 + 6 * nthr].reshape(nthr, 6)
         vehicle = _vehicle_from_block(block, layout, model.body_mass[body], model.body_inertia[body])
         R = data.xmat[body].reshape(3, 3)
-        hull = block[SLOT_HULL]
-        wet = (ud[3] - (data.xipos[body, 2] - 0.5 * hull)) / hull if hull > 0 else 1.0
+        hull = (block[SLOT_HULL_LENGTH], block[SLOT_HULL_WIDTH], block[SLOT_HULL])
+        wet = hull_wet_fraction(hull, R, data.xipos[body, 2], ud[3])
         thruster_wet = thruster_wet_fractions(
             layout[:, :3], R, data.xipos[body, 2], ud[3], block[SLOT_THRUST_FADE]
         )
@@ -218,7 +239,7 @@ def passive_forces(model: mujoco.MjModel, data: mujoco.MjData) -> None:
             data.act[act : act + nthr],
             model.opt.gravity,
             block[26:29],
-            float(np.clip(wet, 0.0, 1.0)),
+            wet,
             thruster_wet,
         )
         if not np.all(np.isfinite(wrench)):
@@ -240,7 +261,7 @@ def _vehicle_from_block(block, layout, mass, inertia) -> VehicleParams:
         added_mass=tuple(block[4:10]),
         linear_damping=tuple(block[10:16]),
         quadratic_damping=tuple(block[16:22]),
-        hull_size=(1.0, 1.0, max(float(block[SLOT_HULL]), 1e-6)),
+        hull_size=(float(block[SLOT_HULL_LENGTH]), float(block[SLOT_HULL_WIDTH]), float(block[SLOT_HULL])),
         thruster_positions=tuple(map(tuple, layout[:, :3])),
         thruster_directions=tuple(map(tuple, layout[:, 3:])),
         thruster=ThrusterParams(float(block[29]), float(block[30]), 0.1, float(block[SLOT_THRUST_FADE])),

@@ -5,7 +5,7 @@ import math
 import mujoco
 import numpy as np
 import pytest
-from fossen_oracle import simulate
+from fossen_oracle import read_vehicle, simulate
 
 from controllers.mixing import MixerParams, mix
 from envs import hydrodynamics
@@ -68,7 +68,9 @@ def test_step_response_matches_solve_ivp(frame, command, axis, duration):
     times, velocities, _ = run(sim, command, duration)
     vehicle = sim.scenario.robots[0].vehicle
     thrusters = mix(command, MixerParams(vehicle.ardusub_frame))
-    ref_t, _, ref_nu = simulate(vehicle, thrusters, duration)
+    ref_t, _, _, ref_nu = simulate(
+        read_vehicle(frame), thrusters, duration, added_mass_coriolis=vehicle.added_mass_coriolis
+    )
     ours, ref = velocities[:, axis], np.interp(times, ref_t, ref_nu[:, axis])
     assert abs(ours[-1] - ref[-1]) <= 0.05 * abs(ref[-1])
     assert abs(t63(times, ours) - t63(times, ref)) <= 0.05 * t63(times, ref) + 0.02  # one control period
