@@ -1,29 +1,34 @@
 """Fossen hydrodynamics and thrust for BlueROV2s in MuJoCo, applied every physics step.
 
 The model, per robot, in the body frame (x forward, y left, z up, origin at the
-centre of gravity; Fossen 2011, Eq. 6.4 with diagonal matrices)::
+centre of gravity; T. I. Fossen, Handbook of Marine Craft Hydrodynamics and Motion
+Control, 2011, with diagonal added mass and damping)::
 
-    (M_RB + M_A) nudot + C_RB(nu) nu + C_A(nu_r) nu_r + D(nu_r) nu_r + g(eta) = tau_thrust
+    M_RB nudot + C_RB(nu) nu + M_A nudot_r + C_A(nu_r) nu_r + D(nu_r) nu_r + g(eta) = tau_thrust
 
-- ``C_A(nu_r) nu_r`` (added-mass Coriolis and the Munk moment) is optional, per
-  vehicle (``added_mass_coriolis``), and off for both BlueROV2 frames: with the
-  published diagonal coefficients (heave added mass three times surge's) the Munk
-  moment exceeds the restoring moment above about 0.3 m/s, and full forward
-  thrust flips the vehicle nose-up within 2 s, which real BlueROV2s do not do;
-- ``nu_r = nu - [R^T v_current; 0]``: damping and added-mass Coriolis act on the
-  velocity relative to an irrotational water current;
+- ``C_A(nu_r) nu_r`` (the added-mass Coriolis terms, the Munk moment among them) is
+  implemented in full and switched per vehicle (``added_mass_coriolis``). Both
+  BlueROV2 frames keep it off by default until ArduSub's STABILIZE exists: with the
+  published coefficients the linearised pitch equation is unstable above about
+  0.48 m/s, so full surge in MANUAL pitches the vehicle over (assets/bluerov2/README.md);
+- ``nu_r = nu - [R^T v_current; 0]``: damping, added mass and C_A act on the velocity
+  relative to an irrotational, constant water current, whose body-frame rate of change
+  ``-w x (R^T v_current)`` is part of ``nudot_r``;
 - ``D(nu_r) = diag(D_lin) + diag(D_quad) |nu_r|`` (linear and quadratic damping);
 - ``g(eta)``: weight at the CG (MuJoCo's gravity) and buoyancy ``B`` straight up at
   the centre of buoyancy, which sits above the CG, so the vehicle rights itself;
+  near the surface buoyancy scales with the wet fraction of the hull box's vertical
+  extent at its attitude (:func:`hull_wet_fraction`);
 - ``tau_thrust``: each thruster's force along its direction at its position, from
   its lagged command ``a`` (MuJoCo actuator state): ``50 a`` N forward, ``40 a`` N
-  reverse (T200).
+  reverse (T200), fading out across the water surface.
 
 **Added mass.** MuJoCo's body mass is one scalar, and the BlueROV2's added mass is
 anisotropic (Heavy: 6.4 kg in surge, 18.7 kg in heave), so it cannot be folded into
 the body. Using last step's acceleration (gz-sim's approach) is unstable. Instead,
 within each step we compute every other force first and solve the diagonal system
-``nudot = tau_other / (M_RB + M_A)`` exactly, then apply ``-M_A nudot``. MuJoCo then
+``nudot = (tau_other - M_A c) / (M_RB + M_A)`` exactly, ``c = [w x (R^T v_current); 0]``,
+then apply ``-M_A (nudot + c)``. MuJoCo then
 moves the rigid body as ``M_RB nudot = tau_other - M_A nudot``, which is the Fossen
 equation above: no feedback through a stale acceleration, so it is as stable as
 the damping itself. Contact forces are not part of ``tau_other``, so in a collision
