@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from controllers.pose import VehicleModel
 from maptidal.paths import asset
 
 VEHICLE_FILE = asset("bluerov2", "bluerov2.toml")
@@ -103,6 +104,19 @@ class VehicleParams:
     def rigid_body_mass(self) -> np.ndarray:
         """Diagonal of M_RB ``(6,)``: mass on the three linear axes, then inertia."""
         return np.array([self.mass] * 3 + list(self.inertia))
+
+    def controller_model(self) -> VehicleModel:
+        """What :mod:`controllers.pose` needs of this vehicle: M_RB + M_A, linear damping, thrusters."""
+        return VehicleModel(
+            inertia=tuple(float(v) for v in self.rigid_body_mass() + np.asarray(self.added_mass)),
+            linear_damping=tuple(self.linear_damping),
+            quadratic_damping=tuple(self.quadratic_damping),
+            thruster_positions=self.thruster_positions,
+            thruster_directions=self.thruster_directions,
+            max_forward_n=self.thruster.max_forward_n,
+            max_reverse_n=self.thruster.max_reverse_n,
+            ardusub_frame=self.ardusub_frame,
+        )
 
 
 def _check_positive(name: str, values, allow_zero: bool = False) -> None:

@@ -41,3 +41,11 @@ def test_readme_commands_run_verbatim(tmp_path, monkeypatch, capsys):
             pytest.fail(f"`maptidal {shlex.join(words)}` exited {status}: {captured.err.strip()}")
     assert (tmp_path / "runs" / "frame1.png").exists()
     assert list((tmp_path / "runs" / "frames").glob("rov0_*.png"))
+
+
+def test_readme_controller_example_runs_to_capture():
+    text = (ROOT / "README.md").read_text()
+    (block,) = [b for b in re.findall(r"```python\n(.*?)```", text, flags=re.S) if "from controllers" in b]
+    scope: dict = {}
+    exec(compile(block, "README.md", "exec"), scope)
+    assert scope["status"] == "capture"

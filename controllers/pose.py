@@ -1,0 +1,219 @@
+"""Depth hold, heading hold and 4-DOF go-to-pose / station keeping, with gains from the Fossen model.
+
+**Gains by rule, not by hand.** Each axis is the plant ``M xddot + D xdot = F`` with M the rigid-body
+mass or inertia plus its added mass and D the linear damping (Fossen's parameters, from the vehicle
+file). Its PID is placed by pole placement on a chosen bandwidth w and damping ratio zeta:
+
+    kp = M w^2,   kd = max(0, 2 zeta M w - D),   ki = kp w / 8
+
+so the closed loop has its poles near -zeta w +- w sqrt(1 - zeta^2) and an integral four times slower
+than the loop, which removes the steady offset of the vehicle's net buoyancy or a current. The
+bandwidth comes from the axis's thrust authority A (N or N m per unit pilot command, from the mixer
+and the thruster layout): w = sqrt(A / (4 M x_ref)), so that an error of x_ref (1 m, or 1 rad) asks
+for a quarter of the authority. zeta = 1 (critically damped). The quadratic damping, left out of the
+design, only adds damping.
+
+The outputs are body-frame forces and torques, turned into the normalised 6-DOF pilot command of
+:mod:`controllers.convention` by dividing by the authority, so the same command drives the simulator's
+mixer and a real vehicle over MAVLink.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.estimation import StateEstimate, rotation_from_rpy, wrap_angle
+from controllers.mixing import MixerParams, allocation_matrix, mix
+from controllers.pid import PID, PIDGains
+from controllers.trajectory import MotionLimits, PoseReference, TrapezoidalProfile
+
+# index of each body axis (x, y, z, roll, pitch, yaw) in the pilot command, and the sign that turns a
+# body-frame force or torque into that pilot axis (sway is right = -y, pitch is nose up = -y torque,
+# yaw is turn right = -z torque; controllers.convention)
+_PILOT_SIGN = np.array([1.0, -1.0, 1.0, 1.0, -1.0, -1.0])
+
+
+@dataclass(frozen=True)
+class VehicleModel:
+    """What the controllers need to know of a vehicle: the diagonal of M_RB + M_A, the linear and
+    quadratic damping (Fossen, per body axis x, y, z, roll, pitch, yaw), and the thruster layout for the
+    authority."""
+
+    def damping_force(self, axis: int, speed: float) -> float:
+        """Fossen's damping on one axis at ``speed``: (d_lin + d_quad |speed|) speed."""
+        return (self.linear_damping[axis] + self.quadratic_damping[axis] * abs(speed)) * speed
+
+    inertia: tuple[float, ...]
+    linear_damping: tuple[float, ...]
+    quadratic_damping: tuple[float, ...]
+    thruster_positions: tuple[tuple[float, float, float], ...]
+    thruster_directions: tuple[tuple[float, float, float], ...]
+    max_forward_n: float
+    max_reverse_n: float
+    ardusub_frame: str
+
+    def authority(self) -> tuple[np.ndarray, np.ndarray]:
+        """Body force or torque per unit pilot command on each axis: (for +1, for -1), both as magnitudes."""
+        matrix = allocation_matrix(self.thruster_positions, self.thruster_directions)
+        params = MixerParams(self.ardusub_frame)
+        result = []
+        for sign in (1.0, -1.0):
+            per_axis = np.zeros(6)
+            for axis in range(6):
+                command = np.zeros(6)
+                command[axis] = sign
+                thrust = mix(command, params)
+                force = np.where(thrust >= 0, thrust * self.max_forward_n, thrust * self.max_reverse_n)
+                body = matrix @ force
+                per_axis[axis] = abs(body[axis])  # pilot order is body order: x, y, z, roll, pitch, yaw
+            result.append(per_axis)
+        return result[0], result[1]
+
+
+def pole_placement_gains(
+    inertia: float, damping: float, authority: float, reference_error: float = 1.0, zeta: float = 1.0
+) -> PIDGains:
+    """The module's gain rule for one axis (see the module docstring); the output is limited to the
+    axis's authority."""
+    if not (inertia > 0 and authority > 0):
+        raise ValueError("pole placement needs a positive inertia and authority")
+    bandwidth = math.sqrt(authority / (4.0 * inertia * reference_error))
+    kp = inertia * bandwidth**2
+    kd = max(0.0, 2.0 * zeta * inertia * bandwidth - damping)
+    return PIDGains(
+        kp=kp, ki=kp * bandwidth / 8.0, kd=kd, output_limit=authority, integral_limit=0.5 * authority
+    )
+
+
+def wrench_to_command(wrench: np.ndarray, authority: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """A body wrench [F; M] as the normalised pilot command, clipped to [-1, 1]."""
+    pilot = np.asarray(wrench, float) * _PILOT_SIGN
+    positive, negative = authority
+    scale = np.where(pilot >= 0, positive, negative)
+    return np.clip(np.divide(pilot, scale, out=np.zeros(6), where=scale > 0), -1.0, 1.0)
+
+
+class PoseController:
+    """Holds or tracks a pose (x, y, z, yaw) on the estimated state; optionally holds roll and pitch
+    level (the Heavy frame can; the standard frame has no pitch authority).
+
+    Position is controlled in the world frame (x and y PIDs, z PID), the force rotated into the body
+    frame by the estimated attitude, with feedforward of M a_ref + D v_ref from the reference.
+    """
+
+    def __init__(self, model: VehicleModel, hold_roll_pitch: bool | None = None) -> None:
+        self.model = model
+        self.authority = model.authority()
+        horizontal = min(self.authority[0][:2].min(), self.authority[1][:2].min())
+        vertical = min(self.authority[0][2], self.authority[1][2])
+        m, d = model.inertia, model.linear_damping
+        self.axes = [
+            PID(pole_placement_gains(m[0], d[0], horizontal)),
+            PID(pole_placement_gains(m[1], d[1], horizontal)),
+            PID(pole_placement_gains(m[2], d[2], vertical)),
+        ]
+        can_pitch = min(self.authority[0][4], self.authority[1][4]) > 0
+        self.hold_roll_pitch = can_pitch if hold_roll_pitch is None else hold_roll_pitch
+        self.attitude = [
+            PID(pole_placement_gains(m[k], d[k], min(self.authority[0][k], self.authority[1][k]) or 1.0))
+            for k in (3, 4, 5)
+        ]
+
+    def reset(self) -> None:
+        """Forget every integral."""
+        for pid in (*self.axes, *self.attitude):
+            pid.reset()
+
+    def update(self, estimate: StateEstimate, reference: PoseReference, dt: float) -> np.ndarray:
+        """The pilot command (6,) that drives the estimate towards the reference."""
+        R = rotation_from_rpy(*estimate.rpy)
+        velocity_world = R @ estimate.velocity_body
+        m = np.asarray(self.model.inertia)
+        force_world = np.zeros(3)
+        for k, pid in enumerate(self.axes):
+            # feedforward of the reference's acceleration and of the damping at its speed; the rigid-body
+            # and added mass are taken along the world axis (yaw aligns them for small roll and pitch)
+            feedforward = m[k] * reference.acceleration[k] + self.model.damping_force(
+                k, reference.velocity[k]
+            )
+            force_world[k] = pid.update(
+                reference.position[k],
+                estimate.position[k],
+                dt,
+                measured_rate=velocity_world[k] - reference.velocity[k],
+                feedforward=feedforward,
+            )
+        wrench = np.zeros(6)
+        wrench[:3] = R.T @ force_world
+        rates = estimate.angular_velocity_body
+        yaw_error = wrap_angle(reference.yaw - estimate.yaw)
+        wrench[5] = self.attitude[2].update(
+            0.0, 0.0, dt, measured_rate=rates[2] - reference.yaw_rate, error=yaw_error
+        )
+        if self.hold_roll_pitch:
+            wrench[3] = self.attitude[0].update(0.0, estimate.rpy[0], dt, measured_rate=rates[0])
+            wrench[4] = self.attitude[1].update(0.0, estimate.rpy[1], dt, measured_rate=rates[1])
+        return wrench_to_command(wrench, self.authority)
+
+
+class DepthHold:
+    """Holds a depth (m below the surface) with the heave axis alone; other axes are left to the pilot.
+
+    A new setpoint is not a step: the reference moves to it on a trapezoidal profile (``limits``), with
+    feedforward of its acceleration and damping, as go-to-pose does, so a depth change does not
+    overshoot.
+    """
+
+    def __init__(self, model: VehicleModel, limits: MotionLimits | None = None) -> None:
+        self.model = model
+        self.limits = limits or MotionLimits()
+        self.authority = model.authority()
+        vertical = min(self.authority[0][2], self.authority[1][2])
+        self.pid = PID(pole_placement_gains(model.inertia[2], model.linear_damping[2], vertical))
+        self._target: float | None = None
+        self._start = 0.0
+        self._profile = TrapezoidalProfile(0.0, self.limits.max_speed, self.limits.max_accel)
+        self._elapsed = 0.0
+
+    def update(
+        self, depth_setpoint_m: float, estimate: StateEstimate, surface_z_m: float, dt: float
+    ) -> float:
+        """The heave command in [-1, 1] (positive up)."""
+        target = surface_z_m - depth_setpoint_m
+        if self._target is None or abs(target - self._target) > 1e-3:
+            here = estimate.position[2] if self._target is None else self._reference(self._elapsed)[0]
+            self._start, self._target, self._elapsed = here, target, 0.0
+            self._profile = TrapezoidalProfile(
+                abs(target - here), self.limits.max_speed, self.limits.max_accel
+            )
+        self._elapsed += dt
+        z_ref, v_ref, a_ref = self._reference(self._elapsed)
+        vertical_speed = (rotation_from_rpy(*estimate.rpy) @ estimate.velocity_body)[2]
+        feedforward = self.model.inertia[2] * a_ref + self.model.damping_force(2, v_ref)
+        force = self.pid.update(
+            z_ref, estimate.position[2], dt, measured_rate=vertical_speed - v_ref, feedforward=feedforward
+        )
+        return float(wrench_to_command(np.array([0, 0, force, 0, 0, 0]), self.authority)[2])
+
+    def _reference(self, t: float) -> tuple[float, float, float]:
+        sign = 1.0 if (self._target or 0.0) >= self._start else -1.0
+        travelled, speed, accel = self._profile.at(t)
+        return self._start + sign * travelled, sign * speed, sign * accel
+
+
+class HeadingHold:
+    """Holds a yaw (rad, counter-clockwise from world +x) with the yaw axis alone."""
+
+    def __init__(self, model: VehicleModel) -> None:
+        self.authority = model.authority()
+        torque = min(self.authority[0][5], self.authority[1][5])
+        self.pid = PID(pole_placement_gains(model.inertia[5], model.linear_damping[5], torque))
+
+    def update(self, yaw_setpoint: float, estimate: StateEstimate, dt: float) -> float:
+        """The yaw command in [-1, 1] (positive turns right)."""
+        error = wrap_angle(yaw_setpoint - estimate.yaw)
+        torque = self.pid.update(0.0, 0.0, dt, measured_rate=estimate.angular_velocity_body[2], error=error)
+        return float(wrench_to_command(np.array([0, 0, 0, 0, 0, torque]), self.authority)[5])

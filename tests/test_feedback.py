@@ -1,0 +1,222 @@
+"""Feedback controllers (controllers/pid, estimation, trajectory, pose, task): unit behaviour, then
+closed loops in the MuJoCo world on both frames, on the estimated state from the robot's own sensors
+(ground truth only to judge the result)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from controllers.estimation import DeadReckoning, EstimatorParams, wrap_angle
+from controllers.pid import PID, PIDGains
+from controllers.pose import DepthHold, HeadingHold, PoseController, pole_placement_gains
+from controllers.task import TaskExecutor, TaskParams
+from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, TrapezoidalProfile
+from envs.scenario import RobotSpec, Scenario
+from envs.simulation import Simulation
+from envs.vehicle import load_vehicle
+from maptidal.tank import LadderConfig, TankConfig, TankModel, WindowConfig
+
+# ----- units -------------------------------------------------------------------------------------
+
+
+def test_pid_derivative_acts_on_the_measurement_so_a_setpoint_step_gives_no_kick():
+    pid = PID(PIDGains(kp=2.0, kd=5.0))
+    pid.update(0.0, 0.0, 0.01)
+    out = pid.update(1.0, 0.0, 0.01)  # setpoint jumps, measurement still
+    assert out == pytest.approx(2.0)  # kp * error only
+    out = pid.update(1.0, 0.01, 0.01)  # measurement moves 1 m/s
+    assert out == pytest.approx(2.0 * 0.99 - 5.0 * 1.0)
+
+
+def test_pid_output_is_limited_and_the_integral_does_not_wind_up():
+    gains = PIDGains(kp=1.0, ki=1.0, output_limit=2.0)
+    pid = PID(gains)
+    for _ in range(1000):  # 10 s of a large error, saturated throughout
+        assert abs(pid.update(10.0, 0.0, 0.01)) <= 2.0
+    assert pid.integral <= 2.0  # clamped: a naive integrator would hold 100
+    # the error changes sign: the output leaves saturation at once instead of after unwinding
+    assert pid.update(-1.0, 0.0, 0.01) < 2.0
+    with pytest.raises(ValueError):
+        PIDGains(kp=-1.0)
+    with pytest.raises(ValueError):
+        pid.update(0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("distance", [0.0, 0.05, 1.0, 5.0])
+def test_trapezoidal_profile_reaches_the_goal_within_its_limits(distance):
+    profile = TrapezoidalProfile(distance, max_speed=0.3, max_accel=0.15)
+    times = np.linspace(0, profile.duration + 1, 4001)
+    s, v, a = np.array([profile.at(t) for t in times]).T
+    assert s[-1] == pytest.approx(distance) and v[-1] == 0.0
+    assert np.all(v <= 0.3 + 1e-12) and np.all(np.abs(a) <= 0.15 + 1e-12)
+    assert np.all(np.diff(s) >= -1e-12)  # never goes back
+    # speed is the derivative of distance travelled
+    np.testing.assert_allclose(np.gradient(s, times), v, atol=2e-3)
+    if distance >= 0.3**2 / 0.15:  # reaches the speed limit: ramp, cruise, ramp
+        assert profile.duration == pytest.approx(distance / 0.3 + 0.3 / 0.15)
+
+
+def test_pose_trajectory_ends_position_and_yaw_together():
+    trajectory = PoseTrajectory([0, 0, 1], 0.0, [2, 0, 1], math.radians(170), MotionLimits(max_yaw_rate=2.0))
+    end = trajectory.at(trajectory.duration)
+    np.testing.assert_allclose(end.position, [2, 0, 1])
+    assert end.yaw == pytest.approx(math.radians(170))
+    middle = trajectory.at(trajectory.duration / 2)
+    assert middle.position[0] == pytest.approx(1.0, abs=1e-9)
+    assert wrap_angle(middle.yaw - math.radians(85)) == pytest.approx(0.0, abs=1e-9)
+    # the short way round
+    back = PoseTrajectory([0, 0, 0], math.radians(170), [0, 0, 0], math.radians(-170))
+    assert abs(back.turn) == pytest.approx(math.radians(20))
+
+
+def test_gains_follow_the_pole_placement_rule():
+    gains = pole_placement_gains(inertia=32.18, damping=33.0, authority=160.0)
+    w = math.sqrt(160.0 / (4 * 32.18))
+    assert gains.kp == pytest.approx(32.18 * w**2) and gains.ki == pytest.approx(gains.kp * w / 8)
+    assert gains.kd == pytest.approx(max(0.0, 2 * 32.18 * w - 33.0))
+    assert gains.output_limit == 160.0
+    # the linear closed loop M s^2 + (D + kd) s + kp has both poles at -w (critical damping)
+    poles = np.roots([32.18, 33.0 + gains.kd, gains.kp])
+    np.testing.assert_allclose(poles.real, -w, rtol=1e-6)
+
+
+# ----- closed loops in the world ----------------------------------------------------------------
+
+OPEN_WATER = TankModel(
+    TankConfig(
+        name="open_water",
+        water_depth=30.0,
+        end_wall_width=30.0,
+        angled_length=0.0,
+        side_length=30.0,
+        side_evaluated_length=0.5,
+        window=WindowConfig(width=0.0),
+        ladder=LadderConfig(rails=0),
+    )
+)
+START = (-15.0, 0.0, 15.0)
+DEPTH_SENSOR = (-0.1, 0.0, 0.1)  # the "depth" site of envs.world.build_robot_spec
+
+
+class Loop:
+    """A robot in open water, its dead-reckoning estimator, and a step that feeds sensors to a controller."""
+
+    def __init__(self, frame: str, current=(0.0, 0.0, 0.0), seed: int = 0) -> None:
+        self.vehicle = load_vehicle(frame)
+        robot = RobotSpec("rov", self.vehicle, START)
+        self.sim = Simulation(Scenario("open", OPEN_WATER, (robot,), current=tuple(current)))
+        self.sim.reset(seed=seed)
+        self.dt = self.sim.scenario.control_period_s
+        mounts = EstimatorParams(OPEN_WATER.height, DEPTH_SENSOR, self.vehicle.sensors.dvl_position)
+        self.estimator = DeadReckoning(mounts, START, 0.0)
+        self.model = self.vehicle.controller_model()
+        self.estimate = self.estimator.update(self.sim.sensors("rov"), self.dt)
+
+    def step(self, command) -> np.ndarray:
+        """Apply a pilot command for one control period; return the true position afterwards."""
+        self.sim.step({"rov": command})
+        self.estimate = self.estimator.update(self.sim.sensors("rov"), self.dt)
+        return np.asarray(self.sim.ground_truth("rov")["position"])
+
+    def true_yaw(self) -> float:
+        return self.sim.ground_truth("rov")["rpy"][2]
+
+
+FRAMES = ["heavy", "standard"]
+SETTLING_S = 12.0  # stated settling time of the 0.5 m depth step (to within 5 cm)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_depth_step_of_half_a_metre_settles_without_overshoot(frame):
+    loop = Loop(frame)
+    depth_hold, heading_hold = DepthHold(loop.model), HeadingHold(loop.model)
+    start_depth = OPEN_WATER.height - START[2]
+    target = start_depth + 0.5
+    depths = []
+    for _ in range(round(25.0 / loop.dt)):
+        heave = depth_hold.update(target, loop.estimate, OPEN_WATER.height, loop.dt)
+        yaw = heading_hold.update(0.0, loop.estimate, loop.dt)
+        depths.append(OPEN_WATER.height - loop.step({"heave": heave, "yaw": yaw})[2])
+    depths = np.array(depths)
+    times = loop.dt * np.arange(1, len(depths) + 1)
+    overshoot = (depths.max() - target) / 0.5
+    assert overshoot < 0.10
+    late = times >= SETTLING_S
+    assert np.all(np.abs(depths[late] - target) < 0.05)
+    assert abs(depths[-1] - target) < 0.02
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_station_keeping_against_a_current_stays_within_20_cm(frame):
+    loop = Loop(frame, current=(0.2, 0.0, 0.0))
+    controller = PoseController(loop.model)
+    hold = PoseReference(np.array(START), np.zeros(3), np.zeros(3), 0.0)
+    errors = []
+    for _ in range(round(40.0 / loop.dt)):
+        position = loop.step(controller.update(loop.estimate, hold, loop.dt))
+        errors.append(np.linalg.norm(position - START))
+    assert max(errors) < 0.2
+    assert np.mean(errors[-250:]) < 0.05  # the integral has taken up the current
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_a_four_waypoint_square_is_flown_within_tolerance(frame):
+    loop = Loop(frame)
+    controller = PoseController(loop.model)
+    corners = np.array(START) + np.array([[1.0, 0, 0], [1.0, 1.0, 0], [0, 1.0, 0], [0, 0, 0]])
+    here = np.array(START)
+    worst = 0.0
+    for corner in corners:
+        trajectory = PoseTrajectory(here, 0.0, corner, 0.0)
+        for k in range(round((trajectory.duration + 4.0) / loop.dt)):
+            reference = trajectory.at((k + 1) * loop.dt)
+            position = loop.step(controller.update(loop.estimate, reference, loop.dt))
+            worst = max(worst, float(np.linalg.norm(position - reference.position)))
+        assert np.linalg.norm(position - corner) < 0.1
+        here = corner
+    assert worst < 0.15
+    assert abs(loop.true_yaw()) < math.radians(5)
+
+
+@pytest.mark.parametrize("frame", FRAMES)
+def test_task_pose_is_reached_and_held_for_its_dwell(frame):
+    loop = Loop(frame)
+    goal = np.array(START) + [1.0, -0.5, -0.3]
+    goal_yaw = math.radians(30)
+    executor = TaskExecutor(
+        PoseController(loop.model), loop.estimate, goal, goal_yaw, TaskParams(dwell_s=3.0)
+    )
+    statuses, held = [], []
+    for _ in range(round(40.0 / loop.dt)):
+        command, status = executor.update(loop.estimate, loop.dt)
+        position = loop.step(command)
+        statuses.append(status)
+        if status in ("hold", "capture"):
+            held.append((np.linalg.norm(position - goal), abs(wrap_angle(loop.true_yaw() - goal_yaw))))
+        if status == "capture":
+            break
+    assert statuses[-1] == "capture"
+    assert executor.held >= 3.0
+    assert all(distance < 0.15 and angle < math.radians(6) for distance, angle in held)
+
+
+def test_an_unreachable_task_times_out():
+    loop = Loop("heavy")
+    goal = np.array(START) + [8.0, 0.0, 0.0]  # 8 m at 0.3 m/s: no chance in 5 s
+    executor = TaskExecutor(PoseController(loop.model), loop.estimate, goal, 0.0, TaskParams(timeout_s=5.0))
+    status = "approach"
+    for _ in range(round(6.0 / loop.dt)):
+        command, status = executor.update(loop.estimate, loop.dt)
+        loop.step(command)
+    assert status == "timeout"
+
+
+def test_the_estimate_comes_from_sensors_and_tracks_the_truth():
+    loop = Loop("heavy")
+    for _ in range(round(10.0 / loop.dt)):
+        loop.step({"surge": 0.3, "yaw": 0.2})
+    truth = loop.sim.ground_truth("rov")
+    assert np.linalg.norm(loop.estimate.position - truth["position"]) < 0.1
+    assert abs(wrap_angle(loop.estimate.yaw - truth["rpy"][2])) < math.radians(3)
+    assert np.max(np.abs(loop.estimate.rpy[:2] - truth["rpy"][:2])) < math.radians(2)
