@@ -235,6 +235,21 @@ def load_tank_config(path: str | Path | None = None) -> TankConfig:
         raise TankConfigError(f"{path}: {err}") from None
 
 
+def open_water_config(size_m: float = 30.0) -> TankConfig:
+    """A plain box of water ``size_m`` wide, long and deep, with no window, ladder or angled walls: for
+    vehicle dynamics and control studies away from the tank's walls (start near its middle)."""
+    return TankConfig(
+        name="open_water",
+        water_depth=size_m,
+        end_wall_width=size_m,
+        angled_length=0.0,
+        side_length=size_m,
+        side_evaluated_length=0.5,
+        window=WindowConfig(width=0.0),
+        ladder=LadderConfig(rails=0),
+    )
+
+
 @dataclass(frozen=True)
 class WallSegment:
     """One flat wall of the evaluated strip, in top view: from ``start`` to ``end``."""

@@ -15,7 +15,7 @@ from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, 
 from envs.scenario import RobotSpec, Scenario
 from envs.simulation import Simulation
 from envs.vehicle import load_vehicle
-from maptidal.tank import LadderConfig, TankConfig, TankModel, WindowConfig
+from maptidal.tank import TankModel, open_water_config
 
 # ----- units -------------------------------------------------------------------------------------
 
@@ -83,18 +83,7 @@ def test_gains_follow_the_pole_placement_rule():
 
 # ----- closed loops in the world ----------------------------------------------------------------
 
-OPEN_WATER = TankModel(
-    TankConfig(
-        name="open_water",
-        water_depth=30.0,
-        end_wall_width=30.0,
-        angled_length=0.0,
-        side_length=30.0,
-        side_evaluated_length=0.5,
-        window=WindowConfig(width=0.0),
-        ladder=LadderConfig(rails=0),
-    )
-)
+OPEN_WATER = TankModel(open_water_config(30.0))
 START = (-15.0, 0.0, 15.0)
 DEPTH_SENSOR = (-0.1, 0.0, 0.1)  # the "depth" site of envs.world.build_robot_spec
 

@@ -20,22 +20,11 @@ from envs.scenario import RobotSpec, Scenario
 from envs.sensors import SensorNoise
 from envs.simulation import Simulation
 from envs.vehicle import load_vehicle
-from maptidal.tank import LadderConfig, TankConfig, TankModel, WindowConfig
+from maptidal.tank import TankModel, open_water_config
 
 G = 9.81
 QUIET = SensorNoise(0, 0, 0, 0, 0, 0, 0)
-OPEN_WATER = TankModel(
-    TankConfig(
-        name="open_water",
-        water_depth=40.0,
-        end_wall_width=40.0,
-        angled_length=0.0,
-        side_length=40.0,
-        side_evaluated_length=0.5,
-        window=WindowConfig(width=0.0),
-        ladder=LadderConfig(rails=0),
-    )
-)
+OPEN_WATER = TankModel(open_water_config(40.0))
 START = np.array([-20.0, 0.0, 20.0])
 
 # Published parameters, transcribed from the papers (mass kg, inertia kg m^2, added mass, damping

@@ -13,21 +13,10 @@ from envs.scenario import RobotSpec, Scenario
 from envs.sensors import SensorNoise
 from envs.simulation import Simulation, SimulationError
 from envs.vehicle import load_vehicle
-from maptidal.tank import LadderConfig, TankConfig, TankModel, WindowConfig
+from maptidal.tank import TankModel, open_water_config
 
 QUIET = SensorNoise(0, 0, 0, 0, 0, 0, 0)
-OPEN_WATER = TankModel(
-    TankConfig(
-        name="open_water",
-        water_depth=30.0,
-        end_wall_width=30.0,
-        angled_length=0.0,
-        side_length=30.0,
-        side_evaluated_length=0.5,
-        window=WindowConfig(width=0.0),
-        ladder=LadderConfig(rails=0),
-    )
-)
+OPEN_WATER = TankModel(open_water_config(30.0))
 
 
 def open_water(frame: str, yaw_deg: float = 0.0, **vehicle) -> Simulation:
