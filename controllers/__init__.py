@@ -11,5 +11,6 @@ against the simulator and a real ArduSub vehicle:
 - ``trajectory``: trapezoidal speed profiles and straight-line pose trajectories;
 - ``pose``: depth hold, heading hold and 4-DOF go-to-pose / station keeping, gains by pole placement
   on the Fossen parameters;
-- ``task``: fly to an inspection pose, hold it for a dwell, then capture (or time out).
+- ``task``: fly to an inspection pose, hold it for a dwell, then capture (or time out);
+- ``flight_modes``: ArduSub's MANUAL, STABILIZE, ALT_HOLD and POSHOLD on the estimated state.
 """

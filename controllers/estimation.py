@@ -71,7 +71,8 @@ class EstimatorParams:
 
 
 class DeadReckoning:
-    """Attitude from gyro and gravity (a complementary filter) with the compass for yaw; z from the
+    """Attitude from gyro and gravity (a complementary filter; the body's own acceleration, from the
+    DVL, taken out of the accelerometer) with the compass for yaw; z from the
     depth sensor; x and y by integrating the DVL's velocity rotated into the world frame (held at its
     last value while the DVL has no bottom lock). Starts from a known pose."""
 
@@ -87,6 +88,7 @@ class DeadReckoning:
         imu = readings.get("imu")
         gyro = np.asarray(imu["gyro"], float) if imu is not None else s.angular_velocity_body
         dvl = readings.get("dvl")
+        previous_velocity = s.velocity_body.copy()
         if dvl is not None and dvl.get("valid") and dvl.get("velocity_body") is not None:
             # the DVL measures its own velocity: take out the lever arm w x r_dvl of a turning vehicle
             s.velocity_body = np.asarray(dvl["velocity_body"], float) - np.cross(
@@ -95,9 +97,10 @@ class DeadReckoning:
         if imu is not None:
             s.angular_velocity_body = gyro
             roll, pitch = s.rpy[0] + gyro[0] * dt, s.rpy[1] + gyro[1] * dt
-            # the accelerometer reads gravity plus the body's acceleration; take out the centripetal
-            # part w x v (a turn at speed), which would otherwise read as a tilt
-            ax, ay, az = np.asarray(imu["accel"], float) - np.cross(gyro, s.velocity_body)
+            # the accelerometer reads gravity plus the body's acceleration vdot + w x v (speeding up, a
+            # turn at speed), which would otherwise read as a tilt: take it out, from the DVL's velocity
+            body_acceleration = (s.velocity_body - previous_velocity) / dt + np.cross(gyro, s.velocity_body)
+            ax, ay, az = np.asarray(imu["accel"], float) - body_acceleration
             # gravity's direction in the body frame gives roll and pitch when the vehicle is not accelerating
             accel_roll, accel_pitch = math.atan2(ay, az), math.atan2(-ax, math.hypot(ay, az))
             k = min(1.0, self.params.tilt_correction_rad_s * dt)

@@ -54,6 +54,8 @@ class VehicleModel:
     max_forward_n: float
     max_reverse_n: float
     ardusub_frame: str
+    # buoyancy minus weight (N): fed forward by depth control, as ArduPilot feeds its hover throttle
+    net_buoyancy_n: float = 0.0
 
     def authority(self) -> tuple[np.ndarray, np.ndarray]:
         """Body force or torque per unit pilot command on each axis: (for +1, for -1), both as magnitudes."""
@@ -139,6 +141,8 @@ class PoseController:
             feedforward = m[k] * reference.acceleration[k] + self.model.damping_force(
                 k, reference.velocity[k]
             )
+            if k == 2:
+                feedforward -= self.model.net_buoyancy_n
             force_world[k] = pid.update(
                 reference.position[k],
                 estimate.position[k],
@@ -193,6 +197,7 @@ class DepthHold:
         z_ref, v_ref, a_ref = self._reference(self._elapsed)
         vertical_speed = (rotation_from_rpy(*estimate.rpy) @ estimate.velocity_body)[2]
         feedforward = self.model.inertia[2] * a_ref + self.model.damping_force(2, v_ref)
+        feedforward -= self.model.net_buoyancy_n
         force = self.pid.update(
             z_ref, estimate.position[2], dt, measured_rate=vertical_speed - v_ref, feedforward=feedforward
         )

@@ -13,6 +13,11 @@ Example::
 Commands are the normalised 6-DOF pilot command of :mod:`controllers.convention`,
 mixed into thruster commands by ArduSub's mixer for the robot's frame; pass
 ``mode="thrusters"`` to command each thruster directly (M1 first, in [-1, 1]).
+
+``Simulation(..., flight_mode="stabilize")`` or :meth:`Simulation.set_flight_mode` flies a robot in an
+ArduSub flight mode (:mod:`controllers.flight_modes`: manual, stabilize, alt_hold, poshold) on the state
+estimated from its own sensors; the API's default is "manual", so that a pilot command is exactly the
+mixer's input, while ``maptidal sim`` flies STABILIZE, as ArduSub pilots do.
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ import time
 import weakref
 from collections.abc import Mapping
 from concurrent.futures import Future
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -31,6 +36,8 @@ import mujoco
 import numpy as np
 
 from controllers.convention import pilot_command
+from controllers.estimation import DeadReckoning, EstimatorParams
+from controllers.flight_modes import FLIGHT_MODES, FlightController
 from controllers.mixing import MixerParams, mix
 from envs import hydrodynamics
 from envs.gl_water import CameraGeometry
@@ -45,7 +52,7 @@ from envs.rendering import (
 from envs.scenario import Scenario, load_scenario
 from envs.sensors import RobotSensors
 from envs.water import WaterModel, depth_to_range, worker_thread
-from envs.world import RobotPlacement, camera_offsets, compose
+from envs.world import DEPTH_SENSOR_POSITION, RobotPlacement, camera_offsets, compose
 from maptidal.camera import StereoCameraParams
 
 WATER_BACKENDS = ("auto", "gl", "cpu")
@@ -74,6 +81,7 @@ class Simulation:
         camera: StereoCameraParams | None = None,
         hydrodynamics_backend: str = "native",
         water_backend: str = "auto",
+        flight_mode: str = "manual",
     ) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         self.camera = camera or StereoCameraParams()
@@ -122,6 +130,8 @@ class Simulation:
         # the process-wide renderer of this model (and its GL context) goes when the simulation does
         self._release_renderer = weakref.finalize(self, release, self.model)
         self._release_renderer.atexit = False  # at exit, envs.rendering frees every renderer itself
+        self._flight_modes = dict.fromkeys(self.robots, flight_mode)
+        self._autopilots: dict[str, _Autopilot] = {}
         self.reset()
 
     def close(self) -> None:
@@ -155,6 +165,36 @@ class Simulation:
             sensors.reset(self.rng)
         mujoco.mj_forward(self.model, self.data)
         self.wall_time_s = 0.0
+        for robot, mode in self._flight_modes.items():
+            self.set_flight_mode(robot, mode)
+
+    def set_flight_mode(self, robot: str, mode: str) -> None:
+        """Fly ``robot`` in an ArduSub flight mode: "manual" (the pilot command goes to the mixer),
+        "stabilize", "alt_hold" or "poshold" (:mod:`controllers.flight_modes`), on the state estimated
+        from the robot's own sensors, started at its current pose as a vehicle's estimator would be."""
+        self._check(robot)
+        if mode not in FLIGHT_MODES:
+            raise ValueError(f"unknown flight mode {mode!r}; choose one of {', '.join(FLIGHT_MODES)}")
+        self._flight_modes[robot] = mode
+        self._autopilots.pop(robot, None)
+        if mode == "manual":
+            return
+        spec = self._specs[robot]
+        needed = {"imu", "compass", "depth"} | ({"dvl"} if mode == "poshold" else set())
+        missing = needed - set(spec.sensors)
+        if missing:
+            raise ValueError(f"{robot}: flight mode {mode} needs the sensors {', '.join(sorted(missing))}")
+        truth = self.ground_truth(robot)
+        surface = self.scenario.tank.height
+        params = EstimatorParams(surface, DEPTH_SENSOR_POSITION, spec.vehicle.sensors.dvl_position)
+        self._autopilots[robot] = _Autopilot(
+            DeadReckoning(params, truth["position"], truth["rpy"][2]),
+            FlightController(mode, spec.vehicle.controller_model(), surface),
+        )
+
+    def flight_mode(self, robot: str) -> str:
+        """The robot's flight mode."""
+        return self._flight_modes[self._check(robot)]
 
     def set_hydrodynamics(self, enabled: bool) -> None:
         """Switch hydrodynamics and thrust on or off (off: a bare rigid body, for baselines)."""
@@ -179,17 +219,27 @@ class Simulation:
         Robots without a command keep their last one. Raises :class:`SimulationError`
         if the state becomes NaN or MuJoCo reports a diverging acceleration.
         """
+        period = self.scenario.substeps * self.scenario.timestep_s
         for robot, command in (commands or {}).items():
             if robot not in self._slots:
                 raise KeyError(f"unknown robot {robot!r}; robots: {', '.join(self.robots)}")
+            if robot in self._autopilots and mode == "pilot":
+                self._autopilots[robot].pilot = pilot_command(command)
+                continue
             thrusters = self.thruster_commands(robot, command, mode)
+            first = self._ctrl_adr[robot]
+            self.data.ctrl[first : first + len(thrusters)] = thrusters
+        for robot, autopilot in self._autopilots.items():
+            # the flight mode runs every control period, on this period's sensor readings
+            estimate = autopilot.estimator.update(self.sensors(robot), period)
+            mixer_input = autopilot.controller.update(autopilot.pilot, estimate, period)
+            thrusters = mix(mixer_input, self._mixers[robot])
             first = self._ctrl_adr[robot]
             self.data.ctrl[first : first + len(thrusters)] = thrusters
         bad_before = self._instability_warnings()
         start = time.perf_counter()
         mujoco.mj_step(self.model, self.data, nstep=self.scenario.substeps)
         self.wall_time_s += time.perf_counter() - start
-        period = self.scenario.substeps * self.scenario.timestep_s
         for sensors in self._sensors.values():
             sensors.advance(period, self.rng)
         diverged = self._instability_warnings() > bad_before
@@ -356,6 +406,15 @@ class Simulation:
         if robot not in self._slots:
             raise KeyError(f"unknown robot {robot!r}; robots: {', '.join(self.robots)}")
         return robot
+
+
+@dataclass
+class _Autopilot:
+    """A robot's flight-mode state: its estimator, its flight controller and the pilot's last command."""
+
+    estimator: DeadReckoning
+    controller: FlightController
+    pilot: np.ndarray = field(default_factory=lambda: np.zeros(6))
 
 
 def rpy_from_matrix(rotation: np.ndarray) -> tuple[float, float, float]:

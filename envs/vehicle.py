@@ -116,6 +116,7 @@ class VehicleParams:
             max_forward_n=self.thruster.max_forward_n,
             max_reverse_n=self.thruster.max_reverse_n,
             ardusub_frame=self.ardusub_frame,
+            net_buoyancy_n=self.buoyancy_n - self.weight_n,
         )
 
 

@@ -26,6 +26,7 @@ WALL_THICKNESS = 0.1  # m, collision boxes behind each surface
 # robots' visible parts; 1 thin decorations on the surfaces (window frame, fouling discs); 3 the
 # invisible collision geoms. Cameras draw groups 0 to 2 (envs.rendering).
 DECORATION_GROUP = 1
+DEPTH_SENSOR_POSITION = (-0.1, 0.0, 0.1)  # m from the CG: the pressure sensor on the electronics tube's end
 _S = mujoco.mjtSensor
 # Every robot's MuJoCo sensors: (name, type, site); envs.sensors reads them by these names.
 ROBOT_SENSORS: tuple[tuple[str, mujoco.mjtSensor, str], ...] = (
@@ -315,7 +316,7 @@ def build_robot_spec(vehicle: VehicleParams, camera: StereoCameraParams | None =
     )
     mounts = vehicle.sensors
     base.add_site(name="dvl", pos=list(mounts.dvl_position))
-    base.add_site(name="depth", pos=[-0.1, 0.0, 0.1])
+    base.add_site(name="depth", pos=list(DEPTH_SENSOR_POSITION))
     tilt = math.radians(mounts.dvl_beam_angle_deg)
     for k, azimuth in enumerate((45.0, 135.0, 225.0, 315.0)):
         a = math.radians(azimuth)
