@@ -67,8 +67,11 @@ def test_step_response_matches_solve_ivp(frame, command, axis, duration):
 
 
 def test_top_speed_is_the_closed_form_balance_of_thrust_and_drag():
-    """Full forward: 2 x 40 N reverse + 2 x 50 N forward at 45 deg = 127.3 N against 13.7 u + 141 u^2."""
-    sim = open_water("heavy")
+    """Full forward: 2 x 40 N reverse + 2 x 50 N forward at 45 deg = 127.3 N against 13.7 u + 141 u^2.
+
+    C_A off: in MANUAL its Munk moment pitches the Heavy over at this speed (test_fossen.py); this is
+    the damping balance alone."""
+    sim = open_water("heavy", added_mass_coriolis=False)
     _, velocities, _ = run(sim, {"surge": 1.0}, 5.0)
     thrust = (2 * 40.0 + 2 * 50.0) * math.cos(math.radians(45))
     expected = (-13.7 + math.sqrt(13.7**2 + 4 * 141.0 * thrust)) / (2 * 141.0)
