@@ -59,7 +59,7 @@ class FlightController:
         self.params = params or ModeParams()
         self.rate = [PID(ATC_RATE_ROLL_PITCH), PID(ATC_RATE_ROLL_PITCH), PID(ATC_RATE_YAW)]
         self.depth_hold = DepthHold(model)
-        authority = model.authority()
+        authority = model.authority
         horizontal = min(authority[0][:2].min(), authority[1][:2].min())
         self.position_pid = [
             PID(pole_placement_gains(model.inertia[k], model.linear_damping[k], horizontal)) for k in (0, 1)

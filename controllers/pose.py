@@ -20,6 +20,7 @@ mixer and a real vehicle over MAVLink.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -57,8 +58,10 @@ class VehicleModel:
     # buoyancy minus weight (N): fed forward by depth control, as ArduPilot feeds its hover throttle
     net_buoyancy_n: float = 0.0
 
+    @functools.cached_property
     def authority(self) -> tuple[np.ndarray, np.ndarray]:
-        """Body force or torque per unit pilot command on each axis: (for +1, for -1), both as magnitudes."""
+        """Body force or torque per unit pilot command on each axis: (for +1, for -1), both as magnitudes
+        (worked out once per model from the mixer and the thruster layout)."""
         matrix = allocation_matrix(self.thruster_positions, self.thruster_directions)
         params = MixerParams(self.ardusub_frame)
         result = []
@@ -108,7 +111,7 @@ class PoseController:
 
     def __init__(self, model: VehicleModel, hold_roll_pitch: bool | None = None) -> None:
         self.model = model
-        self.authority = model.authority()
+        self.authority = model.authority
         horizontal = min(self.authority[0][:2].min(), self.authority[1][:2].min())
         vertical = min(self.authority[0][2], self.authority[1][2])
         m, d = model.inertia, model.linear_damping
@@ -119,6 +122,8 @@ class PoseController:
         ]
         can_pitch = min(self.authority[0][4], self.authority[1][4]) > 0
         self.hold_roll_pitch = can_pitch if hold_roll_pitch is None else hold_roll_pitch
+        # an axis with no authority (the standard frame's pitch) gets placeholder gains: it is never used,
+        # since hold_roll_pitch is off there, and wrench_to_command gives it no command anyway
         self.attitude = [
             PID(pole_placement_gains(m[k], d[k], min(self.authority[0][k], self.authority[1][k]) or 1.0))
             for k in (3, 4, 5)
@@ -174,7 +179,7 @@ class DepthHold:
     def __init__(self, model: VehicleModel, limits: MotionLimits | None = None) -> None:
         self.model = model
         self.limits = limits or MotionLimits()
-        self.authority = model.authority()
+        self.authority = model.authority
         vertical = min(self.authority[0][2], self.authority[1][2])
         self.pid = PID(pole_placement_gains(model.inertia[2], model.linear_damping[2], vertical))
         self._target: float | None = None
@@ -213,7 +218,7 @@ class HeadingHold:
     """Holds a yaw (rad, counter-clockwise from world +x) with the yaw axis alone."""
 
     def __init__(self, model: VehicleModel) -> None:
-        self.authority = model.authority()
+        self.authority = model.authority
         torque = min(self.authority[0][5], self.authority[1][5])
         self.pid = PID(pole_placement_gains(model.inertia[5], model.linear_damping[5], torque))
 
