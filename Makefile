@@ -17,7 +17,10 @@ setup: $(STAMP)
 $(STAMP): pyproject.toml requirements.lock envs/_hydro.c
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -r requirements.lock
+	# the lock is complete (every dependency pinned), so it installs without resolving: MAVProxy declares
+	# vtk, opencv-python and more for its GUI modules, which its console (all the tests use) does not need
+	# and which would clash with opencv-python-headless
+	$(BIN)/python -m pip install -q --no-deps -r requirements.lock
 	$(BIN)/python -m pip install -q --no-deps -e .
 	# compile the C hydrodynamics callback (falls back to numpy when there is no compiler)
 	$(BIN)/python -c "from envs.hydrodynamics import build_native; print('hydrodynamics library:', build_native())"

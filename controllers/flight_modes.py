@@ -17,10 +17,21 @@ out, so one pilot input behaves alike in the simulator and on a vehicle:
 
 The largest lean angle and yaw rate at full stick (``ModeParams``) are our choices, not checked against
 ArduSub's parameter defaults.
+
+**Thrust linearisation.** ArduSub sends its loops' outputs to the thrusters linearly in PWM
+(``AP_Motors6DOF::calc_thrust_to_pwm``), while a T200 pushes nothing inside its deadband and then bends
+up roughly quadratically (:mod:`controllers.thrusters`). With ArduSub's default gains on the published
+BlueROV2 Heavy model, that literal path lets a full surge pitch the Heavy 8 deg before it settles within
+2.5 deg, and turns at 57 % of the stick's yaw rate after 4 s (``tests/test_feedback.py``). By default
+(``ModeParams.linearise_thrust``) the mixer's outputs are read as fractions of each thruster's full
+thrust and the curve is inverted per thruster (:func:`controllers.thrusters.linearise_thrusters`, as
+ArduCopter linearises its propellers), which keeps ArduSub's gains meaningful on the measured
+thrusters. Set it False for ArduSub's literal path.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -45,6 +56,11 @@ class ModeParams:
     max_lean_deg: float = 30.0
     max_yaw_rate_deg_s: float = 90.0
     stick_dead_zone: float = 0.05
+    # True (default): the mixer's outputs are read as fractions of each thruster's full thrust and the
+    # thrust curve is inverted to reach them (controllers.thrusters.linearise_thrusters; what
+    # ArduCopter's MOT_THST_EXPO does for propellers). False: ArduSub's literal path, outputs linear in
+    # PWM, which the T200's deadband and bend soften (module docstring)
+    linearise_thrust: bool = True
 
 
 class FlightController:
@@ -55,6 +71,10 @@ class FlightController:
     ) -> None:
         if mode not in FLIGHT_MODES:
             raise ValueError(f"unknown flight mode {mode!r}; choose one of {', '.join(FLIGHT_MODES)}")
+        # every loop here takes the plant as linear in the command, as ArduSub's do; the thrust curve is
+        # either left to soften them (ArduSub's literal path) or linearised per thruster after the mixer
+        # (ModeParams.linearise_thrust, applied by whoever drives the thrusters: linearise_thrusters)
+        model = dataclasses.replace(model, thrust_curve=None)
         self.mode, self.model, self.surface_z_m = mode, model, surface_z_m
         self.params = params or ModeParams()
         self.rate = [PID(ATC_RATE_ROLL_PITCH), PID(ATC_RATE_ROLL_PITCH), PID(ATC_RATE_YAW)]

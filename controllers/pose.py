@@ -14,27 +14,30 @@ for a quarter of the authority. zeta = 1 (critically damped). The quadratic damp
 design, only adds damping.
 
 The outputs are body-frame forces and torques, turned into the normalised 6-DOF pilot command of
-:mod:`controllers.convention` by dividing by the authority, so the same command drives the simulator's
-mixer and a real vehicle over MAVLink.
+:mod:`controllers.convention` through the inverse of each axis's thrust curve (the T200's deadband and
+bend, :meth:`VehicleModel.pilot_command`), so the loops see a linear plant and the same command drives
+the simulator's mixer and a real vehicle over MAVLink.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from controllers.estimation import StateEstimate, rotation_from_rpy, wrap_angle
 from controllers.mixing import MixerParams, allocation_matrix, mix
 from controllers.pid import PID, PIDGains
+from controllers.thrusters import PwmRange, ThrustCurve
 from controllers.trajectory import MotionLimits, PoseReference, TrapezoidalProfile
 
 # index of each body axis (x, y, z, roll, pitch, yaw) in the pilot command, and the sign that turns a
 # body-frame force or torque into that pilot axis (sway is right = -y, pitch is nose up = -y torque,
 # yaw is turn right = -z torque; controllers.convention)
-_PILOT_SIGN = np.array([1.0, -1.0, 1.0, 1.0, -1.0, -1.0])
+PILOT_SIGN = np.array([1.0, -1.0, 1.0, 1.0, -1.0, -1.0])
+_COMMAND_GRID = np.linspace(0.0, 1.0, 101)
 
 
 @dataclass(frozen=True)
@@ -57,25 +60,56 @@ class VehicleModel:
     ardusub_frame: str
     # buoyancy minus weight (N): fed forward by depth control, as ArduPilot feeds its hover throttle
     net_buoyancy_n: float = 0.0
+    # the thrusters' static curve through ArduSub's PWM mapping; None: thrust proportional to command
+    thrust_curve: ThrustCurve | None = None
+    pwm_range: PwmRange = field(default_factory=PwmRange)
+
+    def thruster_forces(self, commands) -> np.ndarray:
+        """Thrust (N) of each mixed thruster command in [-1, 1]."""
+        c = np.asarray(commands, float)
+        if self.thrust_curve is None:
+            return np.where(c >= 0, c * self.max_forward_n, c * self.max_reverse_n)
+        return self.thrust_curve.thrust_from_command(c, self.pwm_range)
 
     @functools.cached_property
-    def authority(self) -> tuple[np.ndarray, np.ndarray]:
-        """Body force or torque per unit pilot command on each axis: (for +1, for -1), both as magnitudes
-        (worked out once per model from the mixer and the thruster layout)."""
+    def authority_table(self) -> np.ndarray:
+        """``(2, 6, 101)``: the body force or torque magnitude that a pure pilot command of 0, 0.01 .. 1
+        on each axis gives, for +command (row 0) and -command (row 1), through the mixer, the thrust
+        curve and the thruster layout (worked out once per model; monotone in the command)."""
         matrix = allocation_matrix(self.thruster_positions, self.thruster_directions)
         params = MixerParams(self.ardusub_frame)
-        result = []
-        for sign in (1.0, -1.0):
-            per_axis = np.zeros(6)
+        table = np.zeros((2, 6, len(_COMMAND_GRID)))
+        for row, sign in enumerate((1.0, -1.0)):
             for axis in range(6):
-                command = np.zeros(6)
-                command[axis] = sign
-                thrust = mix(command, params)
-                force = np.where(thrust >= 0, thrust * self.max_forward_n, thrust * self.max_reverse_n)
-                body = matrix @ force
-                per_axis[axis] = abs(body[axis])  # pilot order is body order: x, y, z, roll, pitch, yaw
-            result.append(per_axis)
-        return result[0], result[1]
+                for j, level in enumerate(_COMMAND_GRID):
+                    command = np.zeros(6)
+                    command[axis] = sign * level
+                    body = matrix @ self.thruster_forces(mix(command, params))
+                    table[row, axis, j] = abs(body[axis])  # pilot order is body order: x, y, z, r, p, y
+        return np.maximum.accumulate(table, axis=2)
+
+    @property
+    def authority(self) -> tuple[np.ndarray, np.ndarray]:
+        """Body force or torque at full pilot command on each axis: (for +1, for -1), as magnitudes."""
+        table = self.authority_table
+        return table[0, :, -1], table[1, :, -1]
+
+    def pilot_command(self, wrench: np.ndarray) -> np.ndarray:
+        """The normalised pilot command (6,) that gives a body wrench [F; M] axis by axis: the thrust
+        curve is inverted (its deadband and bend), so the feedback loops see a linear plant, as
+        thrust-linearising autopilots do. Clipped to [-1, 1]."""
+        pilot = np.asarray(wrench, float) * PILOT_SIGN
+        table = self.authority_table
+        out = np.zeros(6)
+        for axis in range(6):
+            row = table[0 if pilot[axis] >= 0 else 1, axis]
+            if row[-1] <= 0:
+                continue
+            # keep the last point of every flat run: the inverse then jumps the deadband at once
+            keep = np.append(np.diff(row) > 0, True)
+            level = float(np.interp(min(abs(pilot[axis]), row[-1]), row[keep], _COMMAND_GRID[keep]))
+            out[axis] = np.copysign(level, pilot[axis]) if pilot[axis] != 0 else 0.0
+        return np.clip(out, -1.0, 1.0)
 
 
 def pole_placement_gains(
@@ -94,8 +128,9 @@ def pole_placement_gains(
 
 
 def wrench_to_command(wrench: np.ndarray, authority: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """A body wrench [F; M] as the normalised pilot command, clipped to [-1, 1]."""
-    pilot = np.asarray(wrench, float) * _PILOT_SIGN
+    """A body wrench [F; M] as the normalised pilot command, clipped to [-1, 1], for a plant taken as
+    linear in the command (full authority at +-1), as ArduSub's own loops take it."""
+    pilot = np.asarray(wrench, float) * PILOT_SIGN
     positive, negative = authority
     scale = np.where(pilot >= 0, positive, negative)
     return np.clip(np.divide(pilot, scale, out=np.zeros(6), where=scale > 0), -1.0, 1.0)
@@ -123,7 +158,7 @@ class PoseController:
         can_pitch = min(self.authority[0][4], self.authority[1][4]) > 0
         self.hold_roll_pitch = can_pitch if hold_roll_pitch is None else hold_roll_pitch
         # an axis with no authority (the standard frame's pitch) gets placeholder gains: it is never used,
-        # since hold_roll_pitch is off there, and wrench_to_command gives it no command anyway
+        # since hold_roll_pitch is off there, and pilot_command gives it no command anyway
         self.attitude = [
             PID(pole_placement_gains(m[k], d[k], min(self.authority[0][k], self.authority[1][k]) or 1.0))
             for k in (3, 4, 5)
@@ -165,7 +200,7 @@ class PoseController:
         if self.hold_roll_pitch:
             wrench[3] = self.attitude[0].update(0.0, estimate.rpy[0], dt, measured_rate=rates[0])
             wrench[4] = self.attitude[1].update(0.0, estimate.rpy[1], dt, measured_rate=rates[1])
-        return wrench_to_command(wrench, self.authority)
+        return self.model.pilot_command(wrench)
 
 
 class DepthHold:
@@ -206,7 +241,7 @@ class DepthHold:
         force = self.pid.update(
             z_ref, estimate.position[2], dt, measured_rate=vertical_speed - v_ref, feedforward=feedforward
         )
-        return float(wrench_to_command(np.array([0, 0, force, 0, 0, 0]), self.authority)[2])
+        return float(self.model.pilot_command(np.array([0, 0, force, 0, 0, 0]))[2])
 
     def _reference(self, t: float) -> tuple[float, float, float]:
         sign = 1.0 if (self._target or 0.0) >= self._start else -1.0
@@ -218,6 +253,7 @@ class HeadingHold:
     """Holds a yaw (rad, counter-clockwise from world +x) with the yaw axis alone."""
 
     def __init__(self, model: VehicleModel) -> None:
+        self.model = model
         self.authority = model.authority
         torque = min(self.authority[0][5], self.authority[1][5])
         self.pid = PID(pole_placement_gains(model.inertia[5], model.linear_damping[5], torque))
@@ -226,4 +262,4 @@ class HeadingHold:
         """The yaw command in [-1, 1] (positive turns right)."""
         error = wrap_angle(yaw_setpoint - estimate.yaw)
         torque = self.pid.update(0.0, 0.0, dt, measured_rate=estimate.angular_velocity_body[2], error=error)
-        return float(wrench_to_command(np.array([0, 0, 0, 0, 0, torque]), self.authority)[5])
+        return float(self.model.pilot_command(np.array([0, 0, 0, 0, 0, torque]))[5])

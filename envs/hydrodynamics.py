@@ -19,9 +19,12 @@ Control, 2011, with diagonal added mass and damping)::
   the centre of buoyancy, which sits above the CG, so the vehicle rights itself;
   near the surface buoyancy scales with the wet fraction of the hull box's vertical
   extent at its attitude (:func:`hull_wet_fraction`);
-- ``tau_thrust``: each thruster's force along its direction at its position, from
-  its lagged command ``a`` (MuJoCo actuator state): ``50 a`` N forward, ``40 a`` N
-  reverse (T200), fading out across the water surface.
+- ``tau_thrust``: each thruster's force along its direction at its position: ``a`` times
+  full forward thrust (51.4 N at 16 V) or full reverse thrust (39.9 N), fading out across the
+  water surface. ``a`` (MuJoCo actuator state) is the normalised thrust after the 0.1 s lag;
+  what the lag filters is the static thrust of the command through ArduSub's linear
+  command-to-PWM mapping and the T200's measured curve with its deadband
+  (:mod:`controllers.thrusters`, applied by ``Simulation`` when it sets the controls).
 
 **Added mass.** MuJoCo's body mass is one scalar, and the BlueROV2's added mass is
 anisotropic (Heavy: 6.4 kg in surge, 18.7 kg in heave), so it cannot be folded into
@@ -120,7 +123,9 @@ def pack_userdata(
         block[22] = vehicle.buoyancy_n
         block[23:26] = vehicle.centre_of_buoyancy
         block[26:29] = current
-        block[29:31] = [vehicle.thruster.max_forward_n, vehicle.thruster.max_reverse_n]
+        # full thrust each way: the actuators carry the lagged normalised thrust (Simulation applies the
+        # static T200 curve to the commands before the lag)
+        block[29:31] = [vehicle.thruster.curve.max_forward_n, vehicle.thruster.curve.max_reverse_n]
         layout = np.hstack([vehicle.thruster_positions, vehicle.thruster_directions]).ravel()
         block[31 : 31 + len(layout)] = layout
         block[SLOT_HULL] = vehicle.hull_size[2]
@@ -133,12 +138,6 @@ def pack_userdata(
 def set_enabled(userdata: np.ndarray, enabled: bool) -> None:
     """Switch the hydrodynamics and thrust of every robot on or off (for baselines)."""
     userdata[2] = 1.0 if enabled else 0.0
-
-
-def thruster_forces(act: np.ndarray, max_forward_n: float, max_reverse_n: float) -> np.ndarray:
-    """Thrust (N) of each thruster from its lagged command in [-1, 1] (T200 asymmetry)."""
-    act = np.asarray(act, float)
-    return np.where(act >= 0.0, act * max_forward_n, act * max_reverse_n)
 
 
 def hull_wet_fraction(hull_size, rotation: np.ndarray, cg_z: float, surface_z: float) -> float:
@@ -189,7 +188,7 @@ def body_wrench(
     vr = v - R.T @ current
     nur = np.concatenate([vr, w])
     added = np.asarray(vehicle.added_mass)
-    forces = thruster_forces(act, vehicle.thruster.max_forward_n, vehicle.thruster.max_reverse_n)
+    forces = vehicle.thruster.lagged_forces(act)
     if thruster_wet is not None:
         forces = forces * np.asarray(thruster_wet, float)
     positions = np.asarray(vehicle.thruster_positions)
@@ -254,6 +253,7 @@ def passive_forces(model: mujoco.MjModel, data: mujoco.MjData) -> None:
 
 
 def _vehicle_from_block(block, layout, mass, inertia) -> VehicleParams:
+    from controllers.thrusters import linear_curve
     from envs.vehicle import ThrusterParams
 
     return VehicleParams(
@@ -269,7 +269,10 @@ def _vehicle_from_block(block, layout, mass, inertia) -> VehicleParams:
         hull_size=(float(block[SLOT_HULL_LENGTH]), float(block[SLOT_HULL_WIDTH]), float(block[SLOT_HULL])),
         thruster_positions=tuple(map(tuple, layout[:, :3])),
         thruster_directions=tuple(map(tuple, layout[:, 3:])),
-        thruster=ThrusterParams(float(block[29]), float(block[30]), 0.1, float(block[SLOT_THRUST_FADE])),
+        thruster=ThrusterParams(
+            surface_fade_m=float(block[SLOT_THRUST_FADE]),
+            curve=linear_curve(float(block[29]), float(block[30])),  # only its maxima are packed
+        ),
         added_mass_coriolis=bool(block[SLOT_CORIOLIS]),
     )
 

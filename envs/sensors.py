@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from controllers.estimation import cross3
 from envs.world import ROBOT_SENSORS
 
 WATER_DENSITY = 1000.0  # kg/m^3, fresh water tank
@@ -128,7 +129,7 @@ def heading_from_field(field_body: np.ndarray, up_body: np.ndarray) -> float:
     up = up_body / np.linalg.norm(up_body)
     horizontal = field_body - np.dot(field_body, up) * up
     forward = np.array([1.0, 0.0, 0.0]) - up[0] * up
-    left = np.cross(up, forward)
+    left = cross3(up, forward)
     # angle from north to forward, clockwise seen from above
     angle = math.atan2(np.dot(horizontal, left), np.dot(horizontal, forward))
     return math.degrees(angle) % 360.0

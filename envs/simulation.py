@@ -37,8 +37,9 @@ import numpy as np
 
 from controllers.convention import pilot_command
 from controllers.estimation import DeadReckoning, EstimatorParams
-from controllers.flight_modes import FLIGHT_MODES, FlightController
+from controllers.flight_modes import FLIGHT_MODES, FlightController, ModeParams
 from controllers.mixing import MixerParams, mix
+from controllers.thrusters import linearise_thrusters
 from envs import hydrodynamics
 from envs.gl_water import CameraGeometry
 from envs.rendering import (
@@ -82,7 +83,9 @@ class Simulation:
         hydrodynamics_backend: str = "native",
         water_backend: str = "auto",
         flight_mode: str = "manual",
+        mode_params: ModeParams | None = None,
     ) -> None:
+        self.mode_params = mode_params or ModeParams()
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         self.camera = camera or StereoCameraParams()
         self.backend = hydrodynamics.install_callback(prefer_native=hydrodynamics_backend == "native")
@@ -132,6 +135,7 @@ class Simulation:
         self._release_renderer.atexit = False  # at exit, envs.rendering frees every renderer itself
         self._flight_modes = dict.fromkeys(self.robots, flight_mode)
         self._autopilots: dict[str, _Autopilot] = {}
+        self._thruster_outputs: dict[str, np.ndarray] = {}
         self.reset()
 
     def close(self) -> None:
@@ -189,7 +193,7 @@ class Simulation:
         params = EstimatorParams(surface, DEPTH_SENSOR_POSITION, spec.vehicle.sensors.dvl_position)
         self._autopilots[robot] = _Autopilot(
             DeadReckoning(params, truth["position"], truth["rpy"][2]),
-            FlightController(mode, spec.vehicle.controller_model(), surface),
+            FlightController(mode, spec.vehicle.controller_model(), surface, self.mode_params),
         )
 
     def flight_mode(self, robot: str) -> str:
@@ -213,6 +217,20 @@ class Simulation:
             return np.clip(values, -1.0, 1.0)
         raise ValueError(f"mode must be 'pilot' or 'thrusters', got {mode!r}")
 
+    def _drive(self, robot: str, thrusters: np.ndarray) -> None:
+        # the thrust curve is static, so it acts before the lag: the actuators filter the normalised
+        # thrust the commands ask for (a command inside the deadband asks for none, at once)
+        first = self._ctrl_adr[robot]
+        self._thruster_outputs[robot] = np.asarray(thrusters, float).copy()
+        normalised = self._specs[robot].vehicle.thruster.normalised_thrust(thrusters)
+        self.data.ctrl[first : first + len(thrusters)] = normalised
+
+    def thruster_outputs(self, robot: str) -> np.ndarray:
+        """The thruster commands in [-1, 1] last sent to ``robot``'s thrusters (the mixer's output, after
+        any thrust linearisation; what ArduSub maps to PWM), M1 first."""
+        n = self._specs[self._check(robot)].vehicle.n_thrusters
+        return self._thruster_outputs.get(robot, np.zeros(n)).copy()
+
     def step(self, commands: Mapping[str, object] | None = None, mode: str = "pilot") -> float:
         """Hold ``commands`` (robot name to command) for one control period; returns the new time.
 
@@ -226,22 +244,34 @@ class Simulation:
             if robot in self._autopilots and mode == "pilot":
                 self._autopilots[robot].pilot = pilot_command(command)
                 continue
-            thrusters = self.thruster_commands(robot, command, mode)
-            first = self._ctrl_adr[robot]
-            self.data.ctrl[first : first + len(thrusters)] = thrusters
+            self._drive(robot, self.thruster_commands(robot, command, mode))
         for robot, autopilot in self._autopilots.items():
             # the flight mode runs every control period, on this period's sensor readings
             estimate = autopilot.estimator.update(self.sensors(robot), period)
             mixer_input = autopilot.controller.update(autopilot.pilot, estimate, period)
             thrusters = mix(mixer_input, self._mixers[robot])
-            first = self._ctrl_adr[robot]
-            self.data.ctrl[first : first + len(thrusters)] = thrusters
+            if self.mode_params.linearise_thrust:
+                thruster = self._specs[robot].vehicle.thruster
+                thrusters = linearise_thrusters(thrusters, thruster.curve, thruster.pwm_range)
+            self._drive(robot, thrusters)
+        self.advance_physics(self.scenario.substeps)
+        return self.time
+
+    def set_thrusters(self, robot: str, commands) -> None:
+        """Set ``robot``'s thruster commands in [-1, 1] (M1 first) directly, for drivers that step the
+        physics themselves (:meth:`advance_physics`), such as ArduPilot's JSON backend."""
+        self._drive(self._check(robot), self.thruster_commands(robot, commands, mode="thrusters"))
+
+    def advance_physics(self, n_steps: int) -> float:
+        """Advance ``n_steps`` physics time steps with the controls as they are; the new time.
+
+        Raises :class:`SimulationError` if the state becomes NaN or diverges."""
         bad_before = self._instability_warnings()
         start = time.perf_counter()
-        mujoco.mj_step(self.model, self.data, nstep=self.scenario.substeps)
+        mujoco.mj_step(self.model, self.data, nstep=int(n_steps))
         self.wall_time_s += time.perf_counter() - start
         for sensors in self._sensors.values():
-            sensors.advance(period, self.rng)
+            sensors.advance(n_steps * self.scenario.timestep_s, self.rng)
         diverged = self._instability_warnings() > bad_before
         if diverged or not (np.all(np.isfinite(self.data.qpos)) and np.all(np.isfinite(self.data.qvel))):
             raise SimulationError(
@@ -266,7 +296,8 @@ class Simulation:
 
     def ground_truth(self, robot: str) -> dict:
         """The true state, flagged as such: position, quaternion (w, x, y, z), roll-pitch-yaw,
-        body-frame linear and angular velocity, and the lagged thruster states."""
+        body-frame linear and angular velocity, the specific force (m/s^2, body), and the lagged
+        thruster states."""
         slot = self._slots[self._check(robot)]
         rotation = self.data.xmat[slot.body_id].reshape(3, 3)
         quat = self.data.xquat[slot.body_id]
@@ -278,6 +309,10 @@ class Simulation:
             "rpy": list(rpy_from_matrix(rotation)),
             "velocity_body": (rotation.T @ self.data.qvel[slot.dof_adr : slot.dof_adr + 3]).tolist(),
             "angular_velocity_body": self.data.qvel[slot.dof_adr + 3 : slot.dof_adr + 6].tolist(),
+            # what an ideal accelerometer reads: (a - g) in the body frame, +9.81 up at rest
+            "specific_force_body": (
+                rotation.T @ (self.data.qacc[slot.dof_adr : slot.dof_adr + 3] - self.model.opt.gravity)
+            ).tolist(),
             "thrusters": self.data.act[slot.act_adr : slot.act_adr + n].tolist(),
             "time_s": self.time,
         }

@@ -1,6 +1,6 @@
 """BlueROV2 vehicle parameters, read from ``assets/bluerov2/bluerov2.toml``.
 
-One dataclass per concern: :class:`ThrusterParams` (T200 limits and lag) and
+One dataclass per concern: :class:`ThrusterParams` (T200 curve, PWM range and lag) and
 :class:`VehicleParams` (rigid body, Fossen coefficients, thruster layout, hull).
 Sources of every number: ``assets/bluerov2/README.md``.
 """
@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from controllers.pose import VehicleModel
+from controllers.thrusters import PwmRange, ThrustCurve, linear_curve, t200_curve
 from maptidal.paths import asset
 
 VEHICLE_FILE = asset("bluerov2", "bluerov2.toml")
@@ -26,18 +27,77 @@ class VehicleConfigError(ValueError):
     """A vehicle description that cannot be simulated; the message names the value."""
 
 
+THRUSTER_MODELS = ("t200", "linear")
+
+
 @dataclass(frozen=True)
 class ThrusterParams:
-    """Blue Robotics T200 (legacy spec at 16 V): thrust limits and command-to-thrust lag.
+    """Blue Robotics T200 thrusters: the thrust curve, ArduSub's PWM range, the lag and the surface fade.
 
-    surface_fade_m: a thruster's thrust fades linearly from full, when its centre is this far under
-    the water surface, to none, when it is this far above (half the T200's ~0.1 m duct; a propeller
-    in air pushes nothing, and one breaking the surface ventilates)."""
+    model: "t200" (the maker's measured thrust against pulse width at ``voltage_v``, with its deadband;
+    :mod:`controllers.thrusters`) or "linear" (thrust proportional to command with the same maxima,
+    for studies). pwm_min_us, pwm_max_us: ArduSub's MOT_PWM_MIN and MOT_PWM_MAX, through which a
+    thruster command maps linearly to pulse width. time_constant_s: first-order lag of the thrust
+    towards the curve's static thrust (the curve acts first, as a propeller's speed lags its ESC).
+    surface_fade_m: a thruster's thrust fades linearly from full, when its centre is this far
+    under the water surface, to none, when it is this far above (half the T200's ~0.1 m duct; a
+    propeller in air pushes nothing, and one breaking the surface ventilates). curve: set only to
+    replace the curve that model and voltage_v name."""
 
-    max_forward_n: float = 50.0
-    max_reverse_n: float = 40.0
+    model: str = "t200"
+    voltage_v: float = 16.0
+    pwm_min_us: float = 1100.0
+    pwm_max_us: float = 1900.0
     time_constant_s: float = 0.1
     surface_fade_m: float = 0.05
+    curve: ThrustCurve | None = None
+
+    def __post_init__(self) -> None:
+        if self.model not in THRUSTER_MODELS:
+            raise VehicleConfigError(
+                f"thruster.model {self.model!r}: choose one of {', '.join(THRUSTER_MODELS)}"
+            )
+        _check_positive("thruster.time_constant_s", [self.time_constant_s])
+        _check_positive("thruster.surface_fade_m", [self.surface_fade_m], allow_zero=True)
+        try:
+            PwmRange(self.pwm_min_us, self.pwm_max_us)
+            if self.curve is None:
+                curve = t200_curve(self.voltage_v)
+                if self.model == "linear":
+                    curve = linear_curve(curve.max_forward_n, curve.max_reverse_n)
+                object.__setattr__(self, "curve", curve)
+        except ValueError as error:
+            raise VehicleConfigError(f"thruster: {error}") from None
+
+    @property
+    def pwm_range(self) -> PwmRange:
+        """ArduSub's thruster output range."""
+        return PwmRange(self.pwm_min_us, self.pwm_max_us)
+
+    @property
+    def max_forward_n(self) -> float:
+        """Thrust (N) at full forward command (with the default PWM range, the curve's maximum)."""
+        return float(self.forces([1.0])[0])
+
+    @property
+    def max_reverse_n(self) -> float:
+        """Thrust magnitude (N) at full reverse command."""
+        return float(-self.forces([-1.0])[0])
+
+    def forces(self, commands) -> np.ndarray:
+        """Static thrust (N, along each thruster's direction) of thruster commands in [-1, 1]."""
+        return self.curve.thrust_from_command(commands, self.pwm_range)
+
+    def normalised_thrust(self, commands) -> np.ndarray:
+        """Static thrust of thruster commands as a fraction of full forward (>= 0) or full reverse
+        (< 0) thrust: what the actuators' first-order lag filters."""
+        forces = self.forces(commands)
+        return np.where(forces >= 0, forces / self.curve.max_forward_n, forces / self.curve.max_reverse_n)
+
+    def lagged_forces(self, act) -> np.ndarray:
+        """Thrust (N) of the actuators' lagged normalised thrust in [-1, 1]."""
+        act = np.asarray(act, float)
+        return np.where(act >= 0, act * self.curve.max_forward_n, act * self.curve.max_reverse_n)
 
 
 @dataclass(frozen=True)
@@ -115,6 +175,8 @@ class VehicleParams:
             thruster_directions=self.thruster_directions,
             max_forward_n=self.thruster.max_forward_n,
             max_reverse_n=self.thruster.max_reverse_n,
+            thrust_curve=self.thruster.curve,
+            pwm_range=self.thruster.pwm_range,
             ardusub_frame=self.ardusub_frame,
             net_buoyancy_n=self.buoyancy_n - self.weight_n,
         )

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from controllers.estimation import DeadReckoning, EstimatorParams, wrap_angle
+from controllers.flight_modes import ModeParams
 from controllers.pid import PID, PIDGains
 from controllers.pose import DepthHold, HeadingHold, PoseController, pole_placement_gains
 from controllers.task import TaskExecutor, TaskParams
@@ -215,9 +216,11 @@ def test_the_estimate_comes_from_sensors_and_tracks_the_truth():
 # ----- ArduSub flight modes ---------------------------------------------------------------------
 
 
-def _flying(frame: str, mode: str, current=(0.0, 0.0, 0.0), **vehicle) -> Simulation:
+def _flying(frame: str, mode: str, current=(0.0, 0.0, 0.0), params=None, **vehicle) -> Simulation:
     robot = RobotSpec("rov", load_vehicle(frame, **vehicle), START)
-    sim = Simulation(Scenario("open", OPEN_WATER, (robot,), current=tuple(current)), flight_mode=mode)
+    sim = Simulation(
+        Scenario("open", OPEN_WATER, (robot,), current=tuple(current)), flight_mode=mode, mode_params=params
+    )
     sim.reset(seed=1)
     return sim
 
@@ -257,7 +260,25 @@ def test_stabilize_turns_at_the_stick_rate_and_holds_the_heading_when_released()
     # feedforward) leaves the rate some 10 % short while it fights the yaw damping
     assert rate == pytest.approx(-0.5 * math.radians(90), rel=0.15)
     held = _fly(sim, {}, 6.0)
-    assert np.ptp(np.unwrap(held[-100:, 2])) < math.radians(1)
+    # released, it holds within +-1 deg: the Heavy's yaw is almost undamped near rest (no linear yaw
+    # damping) and ArduSub's yaw rate loop has no D term, so compass noise keeps a small wander
+    assert np.ptp(np.unwrap(held[-100:, 2])) < math.radians(2)
+
+
+def test_ardusubs_literal_thrust_path_is_softer_on_the_t200_curve():
+    """With linearise_thrust off, the rate loops' outputs go to the thrusters linear in PWM, as ArduSub
+    sends them, and the T200's deadband and bend soften them (controllers/flight_modes.py): full surge
+    pitches the Heavy further before it settles, and the yaw rate lags the stick more."""
+    literal = ModeParams(linearise_thrust=False)
+    stable = _fly(
+        _flying("heavy", "stabilize", added_mass_coriolis=True, params=literal), {"surge": 1.0}, 6.0
+    )
+    assert math.radians(4) < np.max(np.abs(stable[:, 1])) < math.radians(12)
+    assert np.max(np.abs(stable[-100:, :2])) < math.radians(3)  # settled within the last 2 s
+    sim = _flying("heavy", "stabilize", params=literal)
+    turning = _fly(sim, {"yaw": 0.5}, 4.0)
+    rate = np.diff(np.unwrap(turning[-50:, 2])).mean() / sim.scenario.control_period_s
+    assert -0.75 * 0.5 * math.radians(90) < rate < -0.4 * 0.5 * math.radians(90)
 
 
 def test_poshold_holds_position_in_a_current():

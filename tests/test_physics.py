@@ -66,17 +66,38 @@ def test_step_response_matches_solve_ivp(frame, command, axis, duration):
     assert np.max(np.abs(ours - ref)) <= 0.05 * abs(ref[-1])
 
 
-def test_top_speed_is_the_closed_form_balance_of_thrust_and_drag():
-    """Full forward: 2 x 40 N reverse + 2 x 50 N forward at 45 deg = 127.3 N against 13.7 u + 141 u^2.
+# Terminal speeds at full command, closed form: thrust = d_l u + d_q u^2 (+ net buoyancy on heave).
+# Thrust at full command, T200 at 16 V (Blue Robotics' 2019 workbook): 51.4 N forward, 39.9 N reverse.
+# Surge and sway: all four horizontal thrusters at 45 deg, two running forward and two in reverse.
+# Heave up: the vertical thrusters point down, so they all run in reverse (Heavy 4, standard 2).
+T200_FORWARD_N, T200_REVERSE_N = 51.4, 39.9
+HORIZONTAL_N = (2 * T200_FORWARD_N + 2 * T200_REVERSE_N) * 0.7071
+DAMPING = {  # (linear, quadratic) per axis surge, sway, heave, typed in from README's table
+    "heavy": [(13.7, 141.0), (0.0, 217.0), (33.0, 190.0)],
+    "standard": [(4.03, 54.72), (6.22, 65.20), (5.18, 111.34)],
+}
+VERTICAL_THRUSTERS = {"heavy": 4, "standard": 2}
+NET_BUOYANCY_N = 2.0
 
-    C_A off: in MANUAL its Munk moment pitches the Heavy over at this speed (test_fossen.py); this is
-    the damping balance alone."""
-    sim = open_water("heavy", added_mass_coriolis=False)
-    _, velocities, _ = run(sim, {"surge": 1.0}, 5.0)
-    thrust = (2 * 40.0 + 2 * 50.0) * math.cos(math.radians(45))
-    expected = (-13.7 + math.sqrt(13.7**2 + 4 * 141.0 * thrust)) / (2 * 141.0)
-    assert velocities[-1, 0] == pytest.approx(expected, rel=0.01)
-    assert 0.85 < expected < 0.95  # about 0.9 m/s, below Blue Robotics' ~1.5 m/s (see README)
+
+def terminal_speed(d_l: float, d_q: float, force: float) -> float:
+    """The positive root of d_q u^2 + d_l u = force."""
+    return (-d_l + math.sqrt(d_l**2 + 4 * d_q * force)) / (2 * d_q)
+
+
+@pytest.mark.parametrize("frame", ["heavy", "standard"])
+@pytest.mark.parametrize(("command", "axis"), [({"surge": 1.0}, 0), ({"sway": -1.0}, 1), ({"heave": 1.0}, 2)])
+def test_terminal_speeds_are_the_closed_form_balance_of_thrust_and_drag(frame, command, axis):
+    """C_A off: in MANUAL the Munk moment pitches the vehicles over at these speeds (test_fossen.py);
+    this is the damping balance alone. The standard frame's full surge is Blue Robotics' ~1.5 m/s."""
+    sim = open_water(frame, added_mass_coriolis=False)
+    _, velocities, _ = run(sim, command, 8.0)
+    d_l, d_q = DAMPING[frame][axis]
+    force = HORIZONTAL_N if axis < 2 else VERTICAL_THRUSTERS[frame] * T200_REVERSE_N + NET_BUOYANCY_N
+    expected = terminal_speed(d_l, d_q, force)
+    assert abs(velocities[-1, axis]) == pytest.approx(expected, rel=0.01)
+    if (frame, axis) == ("standard", 0):
+        assert expected == pytest.approx(1.5, abs=0.01)
 
 
 @pytest.mark.parametrize("frame", ["heavy", "standard"])

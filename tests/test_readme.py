@@ -25,6 +25,23 @@ def readme_commands() -> list[list[str]]:
     return commands
 
 
+def test_readme_console_commands_parse():
+    """The README's ```console blocks show commands that need something running (a vehicle): they are
+    not run, but each `maptidal` line must parse."""
+    from maptidal.cli import build_parser
+
+    text = (ROOT / "README.md").read_text()
+    lines = [
+        shlex.split(line, comments=True)
+        for block in re.findall(r"```console\n(.*?)```", text, flags=re.S)
+        for line in block.splitlines()
+    ]
+    shown = [words[1:] for words in lines if words and words[0] == "maptidal"]
+    assert shown, "no console commands found"
+    for words in shown:
+        build_parser().parse_args(words)
+
+
 def test_readme_shows_the_main_commands():
     shown = {words[0] for words in readme_commands()}
     assert shown >= {"demo", "discover", "compare", "coverage", "sweep", "sim", "allocate", "export-mjcf"}

@@ -22,7 +22,7 @@ import sys
 from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, version
 
-from maptidal.cli import allocation, discovery, evaluation, world
+from maptidal.cli import allocation, discovery, evaluation, mavlink, world
 from maptidal.cli.common import EXIT_BAD_INPUT, EXIT_INTERRUPTED, Parser, RunError, UsageError
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "build_parser", "main"]
@@ -47,7 +47,7 @@ def build_parser() -> Parser:
     )
     parser.add_argument("--version", action="version", version=f"maptidal {package_version()}")
     commands = parser.add_subparsers(dest="subcommand", required=True, metavar="COMMAND")
-    for group in (discovery, evaluation, world, allocation):
+    for group in (discovery, evaluation, world, allocation, mavlink):
         group.register(commands)
     return parser
 

@@ -77,6 +77,28 @@ def bench_physics(n_robots: int, steps: int = 20000) -> tuple[float, float]:
     return bare, hydro
 
 
+def bench_control(n_robots: int, seconds: float = 20.0, flight_mode: str = "manual") -> tuple[float, float]:
+    """Simulation.step (pilot command through the mixer and the T200 curve, optionally a flight mode on
+    the estimated state) against bare mj_step for the same physics steps: (bare steps/s, ours)."""
+    sim = Simulation(scenario(n_robots), flight_mode=flight_mode)
+    sim.reset(seed=0)
+    hydrodynamics.uninstall_callback()
+    gravity = sim.model.opt.gravity.copy()
+    sim.model.opt.gravity[:] = 0.0
+    steps = round(seconds / sim.scenario.timestep_s)
+    bare = steps_per_s(sim.model, sim.data, steps)
+    sim.model.opt.gravity[:] = gravity
+    hydrodynamics.install_callback()
+    sim.reset(seed=0)
+    commands = {name: {"surge": 0.3, "yaw": 0.1} for name in sim.robots}
+    periods = round(seconds / sim.scenario.control_period_s)
+    start = time.perf_counter()
+    for _ in range(periods):
+        sim.step(commands)
+    ours = periods * sim.scenario.substeps / (time.perf_counter() - start)
+    return bare, ours
+
+
 def bench_render(pairs: int, rounds: int = 10) -> dict[str, float]:
     """Pairs/s of a bare mujoco.Renderer and of render_stereo without water, and with the water model
     on each backend (GL shader, CPU), plain and with noise and vignetting.
@@ -136,6 +158,12 @@ def main() -> None:
     for n in (1, 2, 4):
         bare, hydro = bench_physics(n, args.steps)
         print(f"| {n} | {bare:,.0f} | {hydro:,.0f} | {hydro / bare:.2f} |")
+    print("\n| robots | flight mode | bare steps/s | Simulation.step, physics steps/s | ratio |")
+    print("|---|---|---|---|---|")
+    for n in (1, 2):
+        for mode in ("manual", "stabilize"):
+            bare, ours = bench_control(n, flight_mode=mode)
+            print(f"| {n} | {mode} | {bare:,.0f} | {ours:,.0f} | {ours / bare:.2f} |")
     rates = bench_render(args.pairs)
     bare = rates["bare mujoco.Renderer"]
     print("\n| 640x400 stereo pairs | pairs/s | ratio to bare |\n|---|---|---|")

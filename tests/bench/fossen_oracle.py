@@ -14,8 +14,10 @@ equations of motion read
 - M_A = diag of the added masses, C_A(nu_r) = [[0, -S(A11 v_r)], [-S(A11 v_r), -S(A22 w)]] (Eq. 6.43);
 - D(nu_r) = D_lin + D_quad |nu_r|, diagonal (Ch. 6);
 - g(eta) = -[f_g + f_b; r_b x f_b] with f_g = R^T [0, 0, -W], f_b = R^T [0, 0, B] (Ch. 4, here z up);
-- tau: each thruster's force along its direction at its position; thrust = a * 50 N forward,
-  a * 40 N reverse (T200), a the command after a first-order lag.
+- tau: each thruster's force along its direction at its position. A command u becomes a static
+  thrust through ArduSub's linear command-to-PWM mapping (pwm = 1500 + u * 400 with MOT_PWM_MIN/MAX
+  1100/1900) and the T200 curve transcribed below (:func:`t200_thrust`); the thrust follows it with a
+  first-order lag.
 
 S(a) is the skew-symmetric matrix with S(a) b = a x b. The parameters are read from
 assets/bluerov2/bluerov2.toml here, with tomllib, so that this oracle shares no parameter handling with
@@ -33,6 +35,35 @@ from scipy.integrate import solve_ivp
 
 VEHICLE_TOML = Path(__file__).resolve().parents[2] / "assets" / "bluerov2" / "bluerov2.toml"
 GRAVITY = 9.81
+
+
+# The T200 curve, transcribed here from its public sources rather than from controllers.thrusters:
+# - a least-squares quadratic of Blue Robotics' 12 V sheet ("EMPIRICAL FIT TO PUBLISHED T200 12V
+#   Data"): thrust (N) = a pwm^2 + b pwm + c, forward on 1540-1900 us, reverse on 1100-1460 us;
+# - deadband and full thrust at 16 V as read off Blue Robotics' 2019 workbook (duburi_sim's
+#   docs/physics.md table): zero on 1472-1528 us, 51.4 N at 1900 us, -39.9 N at 1100 us.
+# The 16 V curve is the 12 V polynomial stretched from its own zero crossing to the 16 V deadband
+# edge and scaled to the 16 V maximum.
+FIT_12V_FORWARD = (1.27100189603788e-4, -0.33277857760984, 211.033461129255)
+FIT_12V_REVERSE = (-9.16411681345042e-5, 0.316235205225523, -266.314177431551)
+DEADBAND_16V_US = (1472.0, 1528.0)
+MAX_16V_N = (51.4, 39.9)
+
+
+def t200_thrust(pwm: np.ndarray) -> np.ndarray:
+    """Thrust (N) of a T200 at 16 V at each pulse width (us)."""
+    pwm = np.clip(np.asarray(pwm, float), 1100.0, 1900.0)
+    out = np.zeros_like(pwm)
+    for coefficients, edge, end, peak, side in (
+        (FIT_12V_FORWARD, DEADBAND_16V_US[1], 1900.0, MAX_16V_N[0], pwm > DEADBAND_16V_US[1]),
+        (FIT_12V_REVERSE, DEADBAND_16V_US[0], 1100.0, -MAX_16V_N[1], pwm < DEADBAND_16V_US[0]),
+    ):
+        roots = np.roots(coefficients).real
+        zero = roots[np.argmin(np.abs(roots - 1500.0))]  # the 12 V fit's own deadband edge
+        stretched = zero + (pwm - edge) * (end - zero) / (end - edge)
+        value = np.polyval(coefficients, stretched) / np.polyval(coefficients, end) * peak
+        out = np.where(side, value, out)
+    return out
 
 
 def skew(a: np.ndarray) -> np.ndarray:
@@ -53,8 +84,7 @@ class Vehicle:
     d_quad: np.ndarray
     positions: np.ndarray
     directions: np.ndarray
-    max_forward: float
-    max_reverse: float
+    thrust_model: str
     time_constant: float
 
 
@@ -62,6 +92,8 @@ def read_vehicle(frame: str, **changes) -> Vehicle:
     """The frame's parameters from the TOML; ``changes`` replace fields (for closed-form cases)."""
     document = tomllib.loads(VEHICLE_TOML.read_text())
     table, thruster = document[frame], document["thruster"]
+    if (thruster["voltage_v"], thruster["pwm_min_us"], thruster["pwm_max_us"]) != (16.0, 1100.0, 1900.0):
+        raise NotImplementedError("the oracle transcribes the T200 at 16 V with ArduSub's default PWM range")
     directions = np.array(table["thruster_directions"], float)
     vehicle = Vehicle(
         mass=float(table["mass"]),
@@ -73,8 +105,7 @@ def read_vehicle(frame: str, **changes) -> Vehicle:
         d_quad=np.array(table["quadratic_damping"], float),
         positions=np.array(table["thruster_positions"], float),
         directions=directions / np.linalg.norm(directions, axis=1, keepdims=True),
-        max_forward=float(thruster["max_forward_n"]),
-        max_reverse=float(thruster["max_reverse_n"]),
+        thrust_model=str(thruster["model"]),
         time_constant=float(thruster["time_constant_s"]),
     )
     return replace(
@@ -95,6 +126,21 @@ def rotation(q: np.ndarray) -> np.ndarray:
     )
 
 
+def thrust(vehicle: Vehicle, commands: np.ndarray) -> np.ndarray:
+    """Static thrust (N) of thruster commands in [-1, 1]: ArduSub's PWM mapping and the T200 curve, or
+    a straight line through the same maxima for the "linear" model."""
+    a = np.clip(np.asarray(commands, float), -1.0, 1.0)
+    if vehicle.thrust_model == "linear":
+        return np.where(a >= 0.0, a * MAX_16V_N[0], a * MAX_16V_N[1])
+    return t200_thrust(1500.0 + 400.0 * a)
+
+
+def normalised(force: np.ndarray) -> np.ndarray:
+    """Thrust (N) as a fraction of full forward (>= 0) or full reverse (< 0) thrust."""
+    force = np.asarray(force, float)
+    return np.where(force >= 0.0, force / MAX_16V_N[0], force / MAX_16V_N[1])
+
+
 def simulate(
     vehicle: Vehicle,
     thruster_commands,
@@ -109,7 +155,8 @@ def simulate(
 
     Returns (t, world positions (N, 3), quaternions (N, 4), body velocities nu (N, 6))."""
     n = len(vehicle.positions)
-    u = np.asarray(thruster_commands, float)
+    # the curve is static and the lag acts on the thrust: lagged normalised thrust towards this target
+    target = normalised(thrust(vehicle, thruster_commands))
     v_c = np.asarray(current, float)
     M = np.diag(np.concatenate([[vehicle.mass] * 3, vehicle.inertia])) + np.diag(vehicle.added)
     A11, A22 = np.diag(vehicle.added[:3]), np.diag(vehicle.added[3:])
@@ -129,7 +176,7 @@ def simulate(
         f_g = R.T @ np.array([0.0, 0.0, -weight])
         f_b = R.T @ np.array([0.0, 0.0, vehicle.buoyancy])
         g = -np.concatenate([f_g + f_b, np.cross(vehicle.r_b, f_b)])
-        force = np.where(act >= 0.0, act * vehicle.max_forward, act * vehicle.max_reverse)
+        force = np.where(act >= 0.0, act * MAX_16V_N[0], act * MAX_16V_N[1])
         tau = np.concatenate(
             [
                 force @ vehicle.directions,
@@ -148,7 +195,7 @@ def simulate(
                 q[0] * w[2] + q[1] * w[1] - q[2] * w[0],
             ]
         )
-        return np.concatenate([R @ nu[:3], qdot, nudot, (u - act) / vehicle.time_constant])
+        return np.concatenate([R @ nu[:3], qdot, nudot, (target - act) / vehicle.time_constant])
 
     state = np.zeros(13 + n)
     state[3:7] = initial_quaternion

@@ -15,7 +15,12 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-TESTS = ["tests/test_fossen.py", "tests/test_physics.py", "tests/test_controllers.py"]
+TESTS = [
+    "tests/test_fossen.py",
+    "tests/test_physics.py",
+    "tests/test_controllers.py",
+    "tests/test_thrusters.py",
+]
 
 # id: (description, [(file, old, new), ...])
 MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
@@ -100,6 +105,46 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             ("envs/_hydro.c", " - added[i] * current_turn;", ";"),
             ("envs/_hydro.c", "added[i] * (nudot + current_turn)", "added[i] * nudot"),
+        ],
+    ),
+    "M12": (
+        "T200 curve without its deadband",
+        [
+            (
+                "controllers/thrusters.py",
+                "s = np.clip((np.abs(p) - self.deadband_us) / span, 0.0, 1.0)",
+                "s = np.clip(np.abs(p) / 400.0, 0.0, 1.0)",
+            )
+        ],
+    ),
+    "M13": (
+        "T200 curve with the forward and reverse shapes swapped",
+        [
+            (
+                "controllers/thrusters.py",
+                "k = np.where(p >= 0, self.forward_shape, self.reverse_shape)",
+                "k = np.where(p >= 0, self.reverse_shape, self.forward_shape)",
+            )
+        ],
+    ),
+    "M14": (
+        "the simulator drives the actuators with the raw commands (no curve)",
+        [
+            (
+                "envs/simulation.py",
+                "normalised = self._specs[robot].vehicle.thruster.normalised_thrust(thrusters)",
+                "normalised = thrusters",
+            )
+        ],
+    ),
+    "M15": (
+        "the standard frame's surge damping left at Wu's uncalibrated value (vehicle file)",
+        [
+            (
+                "assets/bluerov2/bluerov2.toml",
+                "quadratic_damping = [54.72, 65.20, 111.34,",
+                "quadratic_damping = [18.18, 65.20, 111.34,",
+            )
         ],
     ),
 }
