@@ -21,18 +21,23 @@ import numpy as np
 
 @dataclass
 class StateEstimate:
-    """The estimated state: world position (m), roll-pitch-yaw (rad), body velocity (m/s) and rates."""
+    """The estimated state: world position (m), roll-pitch-yaw (rad), body velocity (m/s) and rates, and
+    the world-frame acceleration (m/s^2, gravity taken out of the accelerometer's specific force)."""
 
     position: np.ndarray = field(default_factory=lambda: np.zeros(3))
     rpy: np.ndarray = field(default_factory=lambda: np.zeros(3))
     velocity_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
     angular_velocity_body: np.ndarray = field(default_factory=lambda: np.zeros(3))
     time_s: float = 0.0
+    acceleration_world: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def yaw(self) -> float:
         """Yaw (rad), counter-clockwise from world +x seen from above."""
         return float(self.rpy[2])
+
+
+STANDARD_GRAVITY = 9.81  # m/s^2, as the simulator's world uses
 
 
 def cross3(a, b) -> np.ndarray:
@@ -115,6 +120,9 @@ class DeadReckoning:
         compass = readings.get("compass")
         if compass is not None:
             s.rpy[2] = wrap_angle(-math.radians(compass["heading_deg"]))
+        if imu is not None:
+            specific_force = rotation_from_rpy(*s.rpy) @ np.asarray(imu["accel"], float)
+            s.acceleration_world = specific_force - np.array([0.0, 0.0, STANDARD_GRAVITY])
         depth = readings.get("depth")
         if depth is not None:
             sensor_height = (rotation_from_rpy(*s.rpy) @ np.asarray(self.params.depth_sensor_position))[2]

@@ -11,9 +11,12 @@ out, so one pilot input behaves alike in the simulator and on a vehicle:
   roll, pitch and yaw inputs (ATC_RAT_RLL/PIT: P 0.135, I 0.090, D 0.0036, IMAX 0.444; ATC_RAT_YAW:
   P 0.180, I 0.018, D 0, IMAX 0.222).
 - **ALT_HOLD**: STABILIZE, and the heave stick drives the vertical thrusters; centred, the depth at
-  which it was released is held (:class:`controllers.pose.DepthHold`, gains by the pole-placement rule).
-- **POSHOLD**: ALT_HOLD, and centred surge and sway sticks hold the horizontal position (world-frame
-  PIDs by the same rule); it needs a position estimate (the DVL's dead reckoning).
+  which it was released is held by ArduSub's vertical position controller (AC_PosControl's position,
+  velocity and acceleration cascade with ArduSub's PSC_* defaults; :mod:`controllers.position_control`).
+- **POSHOLD**: ALT_HOLD, and centred surge and sway sticks hold the horizontal position with
+  AC_PosControl's horizontal cascade, whose lean-angle outputs ArduSub sends to the forward and
+  lateral thrusters (``translate_pos_control_rp``); it needs a position estimate (the DVL's dead
+  reckoning).
 
 The largest lean angle and yaw rate at full stick (``ModeParams``) are our choices, not checked against
 ArduSub's parameter defaults.
@@ -33,13 +36,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from controllers.estimation import StateEstimate, rotation_from_rpy, wrap_angle
+from controllers.estimation import StateEstimate, wrap_angle
 from controllers.pid import PID, PIDGains
-from controllers.pose import DepthHold, VehicleModel, pole_placement_gains, wrench_to_command
+from controllers.pose import VehicleModel
+from controllers.position_control import HorizontalPositionControl, PosControlGains, VerticalPositionControl
 
 FLIGHT_MODES = ("manual", "stabilize", "alt_hold", "poshold")
 
@@ -61,6 +65,7 @@ class ModeParams:
     # ArduCopter's MOT_THST_EXPO does for propellers). False: ArduSub's literal path, outputs linear in
     # PWM, which the T200's deadband and bend soften (module docstring)
     linearise_thrust: bool = True
+    position: PosControlGains = field(default_factory=PosControlGains)
 
 
 class FlightController:
@@ -78,13 +83,8 @@ class FlightController:
         self.mode, self.model, self.surface_z_m = mode, model, surface_z_m
         self.params = params or ModeParams()
         self.rate = [PID(ATC_RATE_ROLL_PITCH), PID(ATC_RATE_ROLL_PITCH), PID(ATC_RATE_YAW)]
-        self.depth_hold = DepthHold(model)
-        authority = model.authority
-        horizontal = min(authority[0][:2].min(), authority[1][:2].min())
-        self.position_pid = [
-            PID(pole_placement_gains(model.inertia[k], model.linear_damping[k], horizontal)) for k in (0, 1)
-        ]
-        self.authority = authority
+        self.depth_control = VerticalPositionControl(self.params.position)
+        self.position_control = HorizontalPositionControl(self.params.position)
         self._heading: float | None = None
         self._depth: float | None = None
         self._hold_xy: np.ndarray | None = None
@@ -117,26 +117,12 @@ class FlightController:
             else:
                 if self._depth is None:
                     self._depth = self.surface_z_m - estimate.position[2]
-                    self.depth_hold = DepthHold(self.model)
-                out[2] = self.depth_hold.update(self._depth, estimate, self.surface_z_m, dt)
+                    self.depth_control.reset()
+                out[2] = self.depth_control.update(self.surface_z_m - self._depth, estimate, dt)
         if self.mode == "poshold":
             if np.any(np.abs(pilot[:2]) > p.stick_dead_zone) or self._hold_xy is None:
                 self._hold_xy = estimate.position[:2].copy()
-                for pid in self.position_pid:
-                    pid.reset()
+                self.position_control.reset()
             else:
-                R = rotation_from_rpy(*estimate.rpy)
-                velocity = R @ estimate.velocity_body
-                force_world = np.array(
-                    [
-                        self.position_pid[k].update(
-                            self._hold_xy[k], estimate.position[k], dt, measured_rate=velocity[k]
-                        )
-                        for k in (0, 1)
-                    ]
-                    + [0.0]
-                )
-                wrench = np.zeros(6)
-                wrench[:3] = R.T @ force_world
-                out[:2] = wrench_to_command(wrench, self.authority)[:2]
+                out[0], out[1] = self.position_control.update(self._hold_xy, estimate, dt)
         return np.clip(out, -1.0, 1.0)

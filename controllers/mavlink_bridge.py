@@ -23,7 +23,8 @@ so the latest command is re-sent every ``command_period_s`` (default 0.05 s, 20 
 - the vehicle's heartbeat missing for ``link_timeout_s`` (3 s): the command is set to neutral,
   ``link_lost`` is set and ``on_link_lost`` is called;
 - leaving the ``with`` block, :meth:`close`, or an exception in the caller's code: neutral, then disarm;
-- SIGINT / SIGTERM: :func:`install_signal_handlers` makes them close the bridge the same way.
+- Ctrl-C (KeyboardInterrupt) and SIGTERM (:func:`install_signal_handlers`) leave the ``with`` block
+  the same way.
 
 **Signing.** MAVLink 2 signing with a 32-byte key (:func:`load_signing_key`: from a file or the
 environment variable ``MAPTIDAL_MAVLINK_KEY``, never from a command line). With a key, unsigned or
@@ -179,9 +180,10 @@ class MavlinkBridge:
         self.telemetry = VehicleTelemetry()
         self.link_lost = False
         self.link_stalled = False
+        self._arm_requested = False
         self._command = np.zeros(6)
-        self._lock = threading.Lock()
-        self._send_lock = threading.Lock()
+        self._lock = threading.RLock()
+        self._send_lock = threading.RLock()
         self._stop = threading.Event()
         self._acks: dict[int, int] = {}
         self._threads: list[threading.Thread] = []
@@ -238,7 +240,8 @@ class MavlinkBridge:
             return
         try:
             self.neutral()
-            if disarm and self.telemetry.armed and not self.link_lost:
+            # also when an arm command went out but its heartbeat has not come back yet
+            if disarm and (self.telemetry.armed or self._arm_requested) and not self.link_lost:
                 try:
                     self.disarm(timeout_s=1.0)
                 except BridgeError as error:
@@ -272,6 +275,7 @@ class MavlinkBridge:
 
     def arm(self, timeout_s: float | None = None) -> None:
         """Arm with MAV_CMD_COMPONENT_ARM_DISARM and wait for the acknowledgement and the armed flag."""
+        self._arm_requested = True
         self._command_long(MAV_CMD_COMPONENT_ARM_DISARM, [1.0], timeout_s)
         self.wait_for(lambda t: t.armed, timeout_s, "the vehicle to report armed")
 
@@ -279,6 +283,7 @@ class MavlinkBridge:
         """Disarm (neutral first) and wait for the acknowledgement and the disarmed flag."""
         self.neutral()
         self._command_long(MAV_CMD_COMPONENT_ARM_DISARM, [0.0], timeout_s)
+        self._arm_requested = False
         self.wait_for(lambda t: not t.armed, timeout_s, "the vehicle to report disarmed")
 
     def set_mode(self, mode: str, timeout_s: float | None = None) -> None:
@@ -292,6 +297,18 @@ class MavlinkBridge:
             MAV_CMD_DO_SET_MODE, [MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, ARDUSUB_MODES[name]], timeout_s
         )
         self.wait_for(lambda t: t.mode == name, timeout_s, f"the vehicle to report mode {name}")
+
+    def set_position_target(self, north_m: float, east_m: float, down_m: float, yaw_rad: float = 0.0) -> None:
+        """In GUIDED: fly to a LOCAL_POSITION_NED position (m) and yaw (rad, clockwise from north), with
+        SET_POSITION_TARGET_LOCAL_NED (position and yaw used, velocities and accelerations ignored)."""
+        values = (north_m, east_m, down_m, yaw_rad)
+        if not all(isinstance(v, int | float) and np.isfinite(v) for v in values):
+            raise ValueError(f"a position target must be finite numbers, got {values}")
+        mask = 8 | 16 | 32 | 64 | 128 | 256 | 2048  # ignore velocity, acceleration and yaw rate
+        with self._send_lock:
+            self._connection.mav.set_position_target_local_ned_send(
+                0, *self._target(), 1, mask, north_m, east_m, down_m, 0, 0, 0, 0, 0, 0, yaw_rad, 0
+            )
 
     def wait_for(
         self, condition: Callable[[VehicleTelemetry], bool], timeout_s: float | None, what: str
@@ -422,12 +439,12 @@ class MavlinkBridge:
             self._stop.wait(min(next_heartbeat, next_command) - time.monotonic())
 
 
-def install_signal_handlers(bridge: MavlinkBridge) -> None:
-    """Make SIGINT and SIGTERM send neutral, disarm and close ``bridge``, then exit (status 130 / 143)."""
+def install_signal_handlers() -> None:
+    """Make SIGTERM raise SystemExit(143) in the main thread, as Ctrl-C raises KeyboardInterrupt, so that
+    the ``with`` block (or the caller's ``finally``) sends neutral, disarms and closes the bridge. The
+    handler itself does no I/O: it may interrupt the main thread inside a send."""
 
     def handler(signum, _frame):
-        bridge.close()
         raise SystemExit(128 + signum)
 
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, handler)
+    signal.signal(signal.SIGTERM, handler)

@@ -289,3 +289,26 @@ def test_poshold_holds_position_in_a_current():
 def test_an_unknown_flight_mode_is_refused():
     with pytest.raises(ValueError, match="unknown flight mode"):
         _flying("heavy", "acro")
+
+
+def test_position_control_is_ardusubs_cascade_with_its_defaults():
+    """Hand-worked AC_PosControl steps with ArduSub's PSC_* defaults (controllers/position_control.py):
+    vertical, a 0.1 m error climbing at 0.05 m/s and accelerating at 0.2 m/s^2; horizontal, a 0.2 m
+    error ahead at rest, heading along +x."""
+    from controllers.estimation import StateEstimate
+    from controllers.position_control import HorizontalPositionControl, VerticalPositionControl
+
+    estimate = StateEstimate(position=np.array([0.0, 0.0, -1.0]), velocity_body=np.array([0.0, 0.0, 0.05]))
+    estimate.acceleration_world = np.array([0.0, 0.0, 0.2])
+    # climb target 3.0 x 0.1 = 0.3 m/s; accel target 8.0 x (0.3 - 0.05) = 2 m/s^2 = 200 cm/s^2; error
+    # 200 - 20 = 180; integral 0.1 x 180 x 0.02 = 0.36; throttle 0.001 (0.5 x 180 + 0.36); heave twice that
+    heave = VerticalPositionControl().update(-0.9, estimate, 0.02)
+    assert heave == pytest.approx(2 * 0.001 * (0.5 * 180 + 0.36))
+    at_rest = StateEstimate(position=np.zeros(3))
+    # velocity target 1.0 x 0.2 = 0.2 m/s = 20 cm/s; accel 1.0 x 20 + 0.5 x 20 x 0.02 = 20.2 cm/s^2
+    forward, lateral = HorizontalPositionControl().update([0.2, 0.0], at_rest, 0.02)
+    assert forward == pytest.approx(math.atan(20.2 / 980.665) / math.radians(45))
+    assert lateral == pytest.approx(0.0, abs=1e-12)
+    # a target to the left (+y) is a lateral command to the left: negative (right is +)
+    _, lateral = HorizontalPositionControl().update([0.0, 0.2], at_rest, 0.02)
+    assert lateral == pytest.approx(-math.atan(20.2 / 980.665) / math.radians(45))

@@ -6,6 +6,7 @@ import json
 import math
 import os
 import shutil
+import signal
 import socket
 import struct
 import subprocess
@@ -179,13 +180,17 @@ def test_bridge_streams_neutral_within_half_a_second_when_the_vehicle_goes_silen
     stop_at = [math.inf]
     thread = threading.Thread(target=fake_vehicle, daemon=True)
     thread.start()
-    bridge = MavlinkBridge(f"udpout:127.0.0.1:{port}", BridgeParams(connect_timeout_s=5)).connect()
+    lost = []
+    params = BridgeParams(connect_timeout_s=5, link_timeout_s=1.0)  # 3 s by default; shorter here
+    bridge = MavlinkBridge(f"udpout:127.0.0.1:{port}", params, on_link_lost=lambda: lost.append(1)).connect()
     try:
         bridge.set_command({"surge": 0.8})
         time.sleep(0.5)
         stop_at[0] = time.monotonic()
         alive.clear()  # the vehicle dies: nothing more comes from it
         thread.join(timeout=5)
+        # past the heartbeat timeout the link is reported lost and the command itself is dropped
+        assert bridge.link_lost and lost == [1] and np.all(bridge.command == 0)
     finally:
         bridge.close(disarm=False)
         vehicle.close()
@@ -492,3 +497,92 @@ def test_real_ardusub_sitl_holds_depth_on_our_physics(tmp_path):
         backend.stop()
         thread.join(timeout=5)
         backend.close()
+
+
+# ----- failsafes on the way out ---------------------------------------------------------------------
+def test_an_exception_in_the_controller_sends_neutral_and_disarms():
+    with Served(speedup=2.0) as served:
+        with pytest.raises(RuntimeError, match="controller bug"), MavlinkBridge(served.url) as bridge:
+            bridge.set_mode("manual")
+            bridge.arm()
+            bridge.set_command({"surge": 0.5})
+            assert wait_until(lambda: served.vehicle.pilot[0] > 0.4)
+            raise RuntimeError("controller bug")
+        assert wait_until(lambda: not served.vehicle.armed)
+        assert np.all(served.vehicle.pilot == 0)
+
+
+def test_sigterm_makes_maptidal_mavlink_send_neutral_and_disarm():
+    with Served(speedup=1.0) as served:
+        command = [
+            sys.executable,
+            "-m",
+            "maptidal.cli",
+            "mavlink",
+            "--connect",
+            served.url,
+            "--duration",
+            "60",
+        ]
+        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            assert wait_until(lambda: served.vehicle.armed, 30)
+            process.send_signal(signal.SIGTERM)
+            process.wait(timeout=15)
+        finally:
+            process.kill()
+        assert process.returncode == 128 + signal.SIGTERM
+        assert wait_until(lambda: not served.vehicle.armed, 5)
+
+
+def test_sim_vehicle_exits_cleanly_on_sigterm():
+    port = free_port()
+    command = [sys.executable, "-m", "maptidal.cli", "sim-vehicle", "--connect", f"udpin:127.0.0.1:{port}"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    gcs = raw_gcs(port)
+    try:
+        deadline = time.monotonic() + 60
+        heartbeat = None
+        while heartbeat is None and time.monotonic() < deadline:
+            gcs.mav.heartbeat_send(6, 8, 0, 0, 0)
+            heartbeat = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
+        assert heartbeat is not None and heartbeat.type == 12  # a submarine
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=15)
+    finally:
+        process.kill()
+        gcs.close()
+    assert process.returncode == 0, err
+    assert '"counters"' in err
+
+
+def test_guided_flies_to_a_position_target():
+    with Served(speedup=4.0) as served, MavlinkBridge(served.url) as bridge:
+        bridge.set_mode("guided")
+        bridge.arm()
+        assert wait_until(lambda: bridge.telemetry.position_ned is not None)
+        north, east, down = bridge.telemetry.position_ned
+        bridge.set_position_target(north + 0.6, east, down)
+        assert wait_until(lambda: abs(bridge.telemetry.position_ned[0] - (north + 0.6)) < 0.1, 15)
+        truth = served.sim.ground_truth("rov0")["position"]
+        assert abs(truth[0] - (north + 0.6)) < 0.15  # our x is north
+        with pytest.raises(ValueError, match="finite"):
+            bridge.set_position_target(math.nan, 0, 0)
+
+
+def test_the_bridge_connects_over_tcp_too():
+    sim = Simulation()
+    sim.reset(seed=0)
+    port = free_port()
+    vehicle = SimVehicle(sim, url=f"tcpin:127.0.0.1:{port}", params=SimVehicleParams(speedup=4.0)).open()
+    thread = threading.Thread(target=vehicle.run, daemon=True)
+    thread.start()
+    try:
+        with MavlinkBridge(f"tcp:127.0.0.1:{port}") as bridge:
+            bridge.set_mode("stabilize")
+            bridge.arm()
+            assert bridge.telemetry.mode == "stabilize" and vehicle.armed
+    finally:
+        vehicle.stop()
+        thread.join(timeout=5)
+        vehicle.close()

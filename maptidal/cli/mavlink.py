@@ -146,7 +146,7 @@ def run_mavlink(args: argparse.Namespace) -> int:
         bridge.connect()
     except BridgeError as error:
         raise RunError(str(error)) from None
-    install_signal_handlers(bridge)
+    install_signal_handlers()
     try:
         result = _status(bridge) if args.action == "status" else _fly(bridge, args, waypoints)
     except BridgeError as error:
