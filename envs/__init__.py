@@ -1,4 +1,8 @@
 """The MuJoCo simulation: world building, hydrodynamics, sensors, rendering and the
-Gymnasium environments. Empty until the [world] issue lands; it may import
+Gymnasium environments (registered on import: ``envs.gym``). It may import
 ``controllers`` and maptidal's pure modules, never maptidal.mission or maptidal.cli.
 """
+
+from envs.gym import register_environments
+
+register_environments()

@@ -75,6 +75,7 @@ SLOT_HULL_LENGTH = (
 )
 SLOT_HULL_WIDTH = 84
 SLOT_CORIOLIS = 81  # 1.0: include C_A(nu_r) nu_r
+SLOT_CURRENT = 26  # the water current (m/s, world), three slots
 SLOT_THRUST_FADE = 82  # half-width (m) of a thruster's fade-out at the water surface
 MAX_THRUSTERS = 8
 _SOURCE = Path(__file__).with_name("_hydro.c")
@@ -122,7 +123,7 @@ def pack_userdata(
         block[16:22] = vehicle.quadratic_damping
         block[22] = vehicle.buoyancy_n
         block[23:26] = vehicle.centre_of_buoyancy
-        block[26:29] = current
+        block[SLOT_CURRENT : SLOT_CURRENT + 3] = current
         # full thrust each way: the actuators carry the lagged normalised thrust (Simulation applies the
         # static T200 curve to the commands before the lag)
         block[29:31] = [vehicle.thruster.curve.max_forward_n, vehicle.thruster.curve.max_reverse_n]

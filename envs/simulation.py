@@ -172,6 +172,37 @@ class Simulation:
         for robot, mode in self._flight_modes.items():
             self.set_flight_mode(robot, mode)
 
+    def place(self, robot: str, position, yaw_rad: float = 0.0) -> None:
+        """Put ``robot`` at ``position`` (m, world) with heading ``yaw_rad`` (counter-clockwise from +x),
+        level and at rest, thrusters idle; its flight mode's estimator restarts there."""
+        slot = self._slots[self._check(robot)]
+        values = np.asarray(position, float)
+        if values.shape != (3,) or not np.all(np.isfinite(values)) or not math.isfinite(yaw_rad):
+            raise ValueError(
+                f"{robot}: a placement needs a finite (x, y, z) and yaw, got {position}, {yaw_rad}"
+            )
+        joint = self.model.body_jntadr[slot.body_id]
+        qpos = self.model.jnt_qposadr[joint]
+        self.data.qpos[qpos : qpos + 3] = values
+        self.data.qpos[qpos + 3 : qpos + 7] = [math.cos(yaw_rad / 2), 0.0, 0.0, math.sin(yaw_rad / 2)]
+        self.data.qvel[slot.dof_adr : slot.dof_adr + 6] = 0.0
+        n = self._specs[robot].vehicle.n_thrusters
+        self.data.act[slot.act_adr : slot.act_adr + n] = 0.0
+        self.data.ctrl[self._ctrl_adr[robot] : self._ctrl_adr[robot] + n] = 0.0
+        mujoco.mj_forward(self.model, self.data)
+        self.set_flight_mode(robot, self._flight_modes[robot])
+
+    def set_current(self, current_world) -> None:
+        """Change the water current (m/s, world frame) from now on; :meth:`reset` restores the
+        scenario's."""
+        current = np.asarray(current_world, float)
+        if current.shape != (3,) or not np.all(np.isfinite(current)):
+            raise ValueError(f"a current is three finite numbers (m/s), got {current_world!r}")
+        for k in range(len(self.robots)):
+            start = hydrodynamics.HEADER + k * hydrodynamics.BLOCK
+            slot = start + hydrodynamics.SLOT_CURRENT
+            self.data.userdata[slot : slot + 3] = current
+
     def set_flight_mode(self, robot: str, mode: str) -> None:
         """Fly ``robot`` in an ArduSub flight mode: "manual" (the pilot command goes to the mixer),
         "stabilize", "alt_hold" or "poshold" (:mod:`controllers.flight_modes`), on the state estimated

@@ -1,0 +1,32 @@
+"""maptidal's Gymnasium environments, registered under the ``MapTidal/`` namespace on ``import envs``:
+
+- ``MapTidal/GoToPose-v0`` (:class:`envs.gym.go_to_pose.GoToPoseEnv`): reach an inspection pose and hold it;
+- ``MapTidal/StationKeeping-v0`` (:class:`envs.gym.station_keeping.StationKeepingEnv`): hold a pose in a
+  current and turbulence that vary per episode;
+- ``MapTidal/TankInspection-v0`` (:class:`envs.gym.tank_inspection.TankInspectionEnv`): see as much of
+  the tank's evaluated walls as possible (reward: newly seen voxels, with occlusion);
+- ``MapTidal/TeamInspection-v0`` (:class:`envs.gym.team_inspection.TeamInspectionEnv`): N robots share
+  that reward, Dict spaces keyed by robot; :func:`envs.gym.team_inspection.parallel_env` is its
+  PettingZoo ``ParallelEnv``.
+
+    import gymnasium, envs
+    env = gymnasium.make("MapTidal/GoToPose-v0")
+"""
+
+from __future__ import annotations
+
+ENVIRONMENTS = {
+    "MapTidal/GoToPose-v0": "envs.gym.go_to_pose:GoToPoseEnv",
+    "MapTidal/StationKeeping-v0": "envs.gym.station_keeping:StationKeepingEnv",
+    "MapTidal/TankInspection-v0": "envs.gym.tank_inspection:TankInspectionEnv",
+    "MapTidal/TeamInspection-v0": "envs.gym.team_inspection:TeamInspectionEnv",
+}
+
+
+def register_environments() -> None:
+    """Register every environment with Gymnasium (idempotent)."""
+    import gymnasium
+
+    for env_id, entry_point in ENVIRONMENTS.items():
+        if env_id not in gymnasium.registry:
+            gymnasium.register(id=env_id, entry_point=entry_point, disable_env_checker=False)

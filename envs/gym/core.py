@@ -1,0 +1,280 @@
+"""The shared machinery of maptidal's Gymnasium environments: one robot of a scenario, its estimated
+state from its own sensors, the action conventions, observations, rendering and episode bookkeeping.
+
+Each task (``go_to_pose.py``, ``station_keeping.py``, ...) subclasses :class:`MapTidalEnv` and says what
+its target, reward and termination are.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import sys
+from dataclasses import dataclass
+from typing import ClassVar
+
+import gymnasium
+import mujoco
+import numpy as np
+from gymnasium import spaces
+
+from controllers.estimation import DeadReckoning, EstimatorParams, rotation_from_rpy, wrap_angle
+from envs.scenario import Scenario, load_scenario, with_frame
+from envs.simulation import Simulation
+from envs.world import DEPTH_SENSOR_POSITION
+
+ACTIONS = ("pilot", "thrusters")
+IMAGES = (None, "left", "stereo")
+# where a robot may be put or sent in the OSB tank (tank frame: end wall at x = 0, floor at z = 0):
+# 0.8 m clear of the end wall, 0.8 m of the 2.4 m wall's centre line, 0.5 m above the floor and below
+# the 2.0 m surface
+SAFE_BOX = (np.array([-3.0, -0.8, 0.5]), np.array([-0.8, 0.8, 1.5]))
+
+
+@dataclass(frozen=True)
+class EnvOptions:
+    """Checked arguments shared by every task (see the task classes' docstrings)."""
+
+    action: str = "pilot"
+    flat_obs: bool = False
+    obs_images: str | None = None
+    image_size: tuple[int, int] = (80, 128)
+    control_period_s: float = 0.1
+    episode_s: float = 20.0
+    frame: str = "heavy"
+
+    def __post_init__(self) -> None:
+        if self.action not in ACTIONS:
+            raise ValueError(f"action must be one of {ACTIONS}, got {self.action!r}")
+        if self.obs_images not in IMAGES:
+            raise ValueError(f"obs_images must be one of {IMAGES}, got {self.obs_images!r}")
+        height, width = self.image_size
+        if not (int(height) > 0 and int(width) > 0):
+            raise ValueError(
+                f"image_size must be two positive integers (height, width), got {self.image_size}"
+            )
+        if self.flat_obs and self.obs_images is not None:
+            raise ValueError("flat_obs cannot carry images: use the Dict observation with obs_images")
+        if not (0 < self.control_period_s <= 1.0):
+            raise ValueError(f"control_period_s must be in (0, 1] s, got {self.control_period_s}")
+        if not (self.episode_s >= self.control_period_s):
+            raise ValueError(f"episode_s must be at least one control period, got {self.episode_s}")
+        if self.frame not in ("heavy", "standard"):
+            raise ValueError(f"frame must be 'heavy' or 'standard', got {self.frame!r}")
+
+
+def _has_display() -> bool:
+    # MuJoCo's viewer needs a window system; without one GLFW would abort the process
+    return sys.platform != "linux" or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+class MapTidalEnv(gymnasium.Env):
+    """Base class: one robot, estimated state, Box(-1, 1) actions, Dict or flat observations.
+
+    ``render_mode="human"`` is offered only where a display exists."""
+
+    metadata: ClassVar[dict] = {
+        "render_modes": ["rgb_array", *(["human"] if _has_display() else [])],
+        "render_fps": 10,
+    }
+
+    def __init__(
+        self,
+        scenario: Scenario | str | None = None,
+        render_mode: str | None = None,
+        **options,
+    ) -> None:
+        known = {f.name for f in dataclasses.fields(EnvOptions)}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise ValueError(f"unknown option(s) {unknown}; the options are {sorted(known)}")
+        self.options = EnvOptions(**options)
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            hint = "" if _has_display() else " ('human' needs a display)"
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}{hint}"
+            )
+        self.render_mode = render_mode
+        base = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        self.scenario = with_frame(base, self.options.frame)
+        flight_mode = "stabilize" if self.options.action == "pilot" else "manual"
+        self.sim = Simulation(self.scenario, flight_mode=flight_mode)
+        self.robot = self.sim.robots[0]
+        spec = self.scenario.robots[0]
+        self.vehicle = spec.vehicle
+        self.substeps = max(1, round(self.options.control_period_s / self.scenario.control_period_s))
+        self.dt = self.substeps * self.scenario.control_period_s
+        self.max_steps = max(1, round(self.options.episode_s / self.dt))
+        n = self.vehicle.n_thrusters if self.options.action == "thrusters" else 6
+        self.action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
+        self._dict_space = spaces.Dict(self._observation_spaces())
+        if self.options.flat_obs:
+            size = sum(int(np.prod(space.shape)) for space in self._dict_space.spaces.values())
+            self.observation_space = spaces.Box(-np.inf, np.inf, (size,), np.float32)
+        else:
+            self.observation_space = self._dict_space
+        self._estimator: DeadReckoning | None = None
+        self._steps = 0
+        self._renderer: mujoco.Renderer | None = None
+        self._viewer = None
+
+    # ----- what a task says -------------------------------------------------------------------
+    def _task_spaces(self) -> dict[str, spaces.Space]:
+        """The task's own observation entries."""
+        return {}
+
+    def _task_observation(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def _start_episode(self) -> None:
+        """Choose the start pose, targets and water for a new episode (uses self.np_random)."""
+
+    def _reward(self, truth: dict) -> tuple[float, bool, dict]:
+        """(reward, terminated, info) after one step."""
+        raise NotImplementedError
+
+    # ----- gymnasium API ----------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start an episode; ``seed`` seeds the start pose, targets, currents and all sensor and
+        camera noise."""
+        super().reset(seed=seed)
+        self.sim.reset(seed=int(self.np_random.integers(2**31 - 1)))
+        self._steps = 0
+        self._start_episode()
+        truth = self.sim.ground_truth(self.robot)
+        params = EstimatorParams(
+            self.scenario.tank.height, DEPTH_SENSOR_POSITION, self.vehicle.sensors.dvl_position
+        )
+        self._estimator = DeadReckoning(params, truth["position"], truth["rpy"][2])
+        self._readings = self.sim.sensors(self.robot)
+        self._estimate = self._estimator.update(self._readings, self.scenario.control_period_s)
+        return self._observation(), {}
+
+    def step(self, action):
+        """Hold ``action`` for one control period (``control_period_s``)."""
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"action must have shape {self.action_space.shape}, got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be finite, got {a.tolist()}")
+        a = np.clip(a, -1.0, 1.0)
+        mode = "thrusters" if self.options.action == "thrusters" else "pilot"
+        energy = 0.0
+        for _ in range(self.substeps):
+            self._before_substep()
+            self.sim.step({self.robot: a}, mode=mode)
+            self._readings = self.sim.sensors(self.robot)
+            self._estimate = self._estimator.update(self._readings, self.scenario.control_period_s)
+            energy += float(np.mean(self.sim.thruster_outputs(self.robot) ** 2))
+        self._energy = energy / self.substeps
+        self._steps += 1
+        truth = self.sim.ground_truth(self.robot)
+        reward, terminated, info = self._reward(truth)
+        truncated = not terminated and self._steps >= self.max_steps
+        return self._observation(), float(reward), bool(terminated), bool(truncated), info
+
+    def _before_substep(self) -> None:
+        """Hook for tasks that change the water while the episode runs."""
+
+    # ----- observations -------------------------------------------------------------------
+    def _observation_spaces(self) -> dict[str, spaces.Space]:
+        box = lambda n: spaces.Box(-np.inf, np.inf, (n,), np.float32)  # noqa: E731
+        entries: dict[str, spaces.Space] = {
+            "pose": box(6),
+            "velocity": box(6),
+            "depth": box(1),
+            "imu": box(6),
+        }
+        entries.update(self._task_spaces())
+        height, width = (int(v) for v in self.options.image_size)
+        if self.options.obs_images == "left":
+            entries["left"] = spaces.Box(0, 255, (height, width, 3), np.uint8)
+        elif self.options.obs_images == "stereo":
+            entries["stereo"] = spaces.Box(0, 255, (2, height, width, 3), np.uint8)
+        return entries
+
+    def _observation(self):
+        e = self._estimate
+        imu = self._readings.get("imu", {})
+        depth = self._readings.get("depth", {})
+        values = {
+            "pose": np.r_[e.position, e.rpy],
+            "velocity": np.r_[e.velocity_body, e.angular_velocity_body],
+            "depth": np.array([depth.get("depth_m", 0.0)]),
+            "imu": np.r_[imu.get("accel", np.zeros(3)), imu.get("gyro", np.zeros(3))],
+        }
+        values.update(self._task_observation())
+        observation = {key: np.asarray(value, np.float32) for key, value in values.items()}
+        if self.options.obs_images is not None:
+            observation.update(self._images())
+        if self.options.flat_obs:
+            return np.concatenate([observation[key].ravel() for key in self._dict_space.spaces])
+        return observation
+
+    def _images(self) -> dict[str, np.ndarray]:
+        import cv2
+
+        height, width = (int(v) for v in self.options.image_size)
+        left, right = self.sim.render_stereo(self.robot)
+        small = [cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA) for image in (left, right)]
+        if self.options.obs_images == "left":
+            return {"left": small[0]}
+        return {"stereo": np.stack(small)}
+
+    # ----- helpers for tasks ----------------------------------------------------------------
+    def _sample_pose(self) -> tuple[np.ndarray, float]:
+        low, high = SAFE_BOX
+        return self.np_random.uniform(low, high), float(self.np_random.uniform(-math.pi, math.pi))
+
+    def _relative_target(self, target: np.ndarray, target_yaw: float) -> np.ndarray:
+        """The target as the robot estimates it: offset in its heading frame (m) and yaw error (rad)."""
+        e = self._estimate
+        offset_world = np.asarray(target, float) - e.position
+        heading = rotation_from_rpy(0.0, 0.0, e.yaw)
+        return np.r_[heading.T @ offset_world, wrap_angle(target_yaw - e.yaw)]
+
+    def _out_of_bounds(self, truth: dict) -> bool:
+        """Left the water, or the evaluated region of the tank."""
+        x, _, z = truth["position"]
+        return bool(z > self.scenario.tank.height - 0.15 or z < 0.15 or x < -6.0)
+
+    # ----- rendering ------------------------------------------------------------------------
+    def render(self):
+        """``rgb_array``: a third-person view following the robot, its left camera inset top right.
+        ``human``: MuJoCo's passive viewer (needs a display)."""
+        if self.render_mode == "rgb_array":
+            return self._render_rgb()
+        if self.render_mode == "human":
+            if self._viewer is None:
+                import mujoco.viewer
+
+                self._viewer = mujoco.viewer.launch_passive(self.sim.model, self.sim.data)
+            self._viewer.sync()
+        return None
+
+    def _render_rgb(self, height: int = 240, width: int = 320) -> np.ndarray:
+        import cv2
+
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.sim.model, height, width)
+        camera = mujoco.MjvCamera()
+        camera.type = mujoco.mjtCamera.mjCAMERA_TRACKING
+        camera.trackbodyid = self.sim.model.body(f"{self.robot}/base").id
+        camera.distance, camera.elevation, camera.azimuth = 2.5, -20.0, 200.0
+        self._renderer.update_scene(self.sim.data, camera=camera)
+        frame = self._renderer.render().copy()
+        left, _ = self.sim.render_stereo(self.robot)
+        inset = cv2.resize(left, (width // 3, height // 3), interpolation=cv2.INTER_AREA)
+        frame[4 : 4 + inset.shape[0], width - 4 - inset.shape[1] : width - 4] = inset
+        return frame
+
+    def close(self) -> None:
+        """Free the renderers and the viewer."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None
+        self.sim.close()

@@ -1,0 +1,118 @@
+"""``MapTidal/GoToPose-v0``: fly one BlueROV2 to an inspection pose and hold it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from gymnasium import spaces
+
+from controllers.estimation import wrap_angle
+from envs.gym.core import SAFE_BOX, MapTidalEnv
+
+POSITION_TOLERANCE_M = 0.1  # the task executor's defaults (controllers/task.py)
+YAW_TOLERANCE_RAD = math.radians(5.0)
+
+
+class GoToPoseEnv(MapTidalEnv):
+    """One BlueROV2 in the OSB tank reaches a random inspection pose (position and yaw) and holds it.
+
+    ## Action space
+
+    ``Box(-1, 1, (6,), float32)``: the normalised pilot command of ``controllers/convention.py``, flown
+    through ArduSub's STABILIZE (the default ``action="pilot"``):
+
+    | index | axis | +1 means |
+    |---|---|---|
+    | 0 | surge | full forward |
+    | 1 | sway | full right |
+    | 2 | heave | full up |
+    | 3 | roll | lean right (STABILIZE: 30 deg) |
+    | 4 | pitch | nose up (STABILIZE: 30 deg) |
+    | 5 | yaw | turn right (STABILIZE: 90 deg/s) |
+
+    ``action="thrusters"``: ``Box(-1, 1, (n,))``, one command per thruster (8 on the Heavy, 6 on the
+    standard frame), in ArduSub's motor order, straight to the thrusters (MANUAL).
+
+    ## Observation space
+
+    A ``Dict`` (or, with ``flat_obs=True``, the same entries concatenated in this order into one Box):
+
+    | key | shape | content | unit |
+    |---|---|---|---|
+    | pose | 6 | estimated x, y, z (tank frame, z up), roll, pitch (nose down +), yaw | m, rad |
+    | velocity | 6 | estimated body velocity u, v, w (x fwd, y left, z up), rates p, q, r | m/s, rad/s |
+    | depth | 1 | depth sensor reading | m |
+    | imu | 6 | accelerometer (specific force) and gyro, body frame | m/s^2, rad/s |
+    | target | 4 | target offset in the heading frame (forward, left, up), yaw error | m, rad |
+    | left | (H, W, 3) | with ``obs_images="left"``: the left camera image | uint8 |
+    | stereo | (2, H, W, 3) | with ``obs_images="stereo"``: both camera images | uint8 |
+
+    The state is what the robot's own sensors give (IMU, depth, DVL, compass, with noise, dead
+    reckoning in ``controllers/estimation.py``), never ground truth.
+
+    ## Rewards
+
+    Per step, from the true pose: ``10 x`` the distance gained towards the target (m), ``+ 2 x`` the yaw
+    error reduced (rad), ``- 0.05 x`` the mean squared thruster command (energy), ``+ 1`` while within
+    0.1 m and 5 deg of the target.
+
+    ## Starting state
+
+    A random pose in the tank's safe box (x in [-3.0, -0.8] m, y in [-0.8, 0.8] m, z in [0.5, 1.5] m,
+    any yaw), at rest; the target is a random pose 0.5 to 1.5 m away inside the same box.
+
+    ## Episode end
+
+    Terminated: a collision (-10), or leaving the water or the tank's evaluated region (-10).
+    Truncated: after ``episode_s`` (default 20 s). ``info["is_success"]`` is true while within tolerance.
+
+    ## Arguments
+
+    ``gymnasium.make("MapTidal/GoToPose-v0", action="pilot", flat_obs=False, obs_images=None,
+    image_size=(80, 128), control_period_s=0.1, episode_s=20.0, frame="heavy", scenario=None,
+    render_mode=None)``.
+
+    ## Version history
+
+    - v0: first version (maptidal 0.1).
+    """
+
+    def _task_spaces(self) -> dict[str, spaces.Space]:
+        return {"target": spaces.Box(-np.inf, np.inf, (4,), np.float32)}
+
+    def _task_observation(self) -> dict[str, np.ndarray]:
+        return {"target": self._relative_target(self.target, self.target_yaw)}
+
+    def _start_episode(self) -> None:
+        start, yaw = self._sample_pose()
+        self.sim.place(self.robot, start, yaw)
+        low, high = SAFE_BOX
+        for _ in range(100):
+            offset = self.np_random.normal(size=3)
+            offset *= self.np_random.uniform(0.5, 1.5) / np.linalg.norm(offset)
+            target = start + offset
+            if np.all(target >= low) and np.all(target <= high):
+                break
+        else:
+            target = np.clip(start + offset, low, high)
+        self.target = target
+        self.target_yaw = float(self.np_random.uniform(-math.pi, math.pi))
+        self._previous = self._errors(self.sim.ground_truth(self.robot))
+
+    def _errors(self, truth: dict) -> tuple[float, float]:
+        distance = float(np.linalg.norm(np.asarray(truth["position"]) - self.target))
+        return distance, abs(wrap_angle(self.target_yaw - truth["rpy"][2]))
+
+    def _reward(self, truth: dict) -> tuple[float, bool, dict]:
+        distance, yaw_error = self._errors(truth)
+        reward = 10.0 * (self._previous[0] - distance) + 2.0 * (self._previous[1] - yaw_error)
+        reward -= 0.05 * self._energy
+        within = distance <= POSITION_TOLERANCE_M and yaw_error <= YAW_TOLERANCE_RAD
+        reward += 1.0 if within else 0.0
+        self._previous = (distance, yaw_error)
+        terminated = False
+        if self.sim.contacts() or self._out_of_bounds(truth):
+            reward -= 10.0
+            terminated = True
+        return reward, terminated, {"is_success": within, "distance_m": distance, "yaw_error_rad": yaw_error}

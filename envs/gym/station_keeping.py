@@ -1,0 +1,99 @@
+"""``MapTidal/StationKeeping-v0``: hold a pose against a current and turbulence that vary per episode."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from gymnasium import spaces
+
+from controllers.estimation import wrap_angle
+from envs.gym.core import MapTidalEnv
+
+POSITION_TOLERANCE_M = 0.1
+YAW_TOLERANCE_RAD = math.radians(5.0)
+
+
+class StationKeepingEnv(MapTidalEnv):
+    """One BlueROV2 holds the pose it starts at while a current and turbulence push it off.
+
+    ## Action space
+
+    As ``MapTidal/GoToPose-v0``: ``Box(-1, 1, (6,), float32)`` pilot commands through STABILIZE, or
+    ``action="thrusters"``.
+
+    ## Observation space
+
+    As ``MapTidal/GoToPose-v0`` (pose, velocity, depth, imu, target; optional images); ``target`` is the
+    pose to hold, as the robot estimates it (offset in its heading frame, m, and yaw error, rad).
+
+    ## Rewards
+
+    Per step, from the true pose: ``- distance`` (m) ``- 0.5 x`` the yaw error (rad) ``- 0.05 x`` the
+    mean squared thruster command, ``+ 1`` while within 0.1 m and 5 deg.
+
+    ## Starting state
+
+    A random pose in the tank's safe box, at rest, which is also the pose to hold. The episode's current
+    is horizontal, of a random direction and a speed drawn from [0, ``max_current_m_s``] (default
+    0.2 m/s); turbulence adds an Ornstein-Uhlenbeck gust on each axis with standard deviation
+    ``turbulence_m_s`` (default 0.03 m/s) and a 2 s time constant.
+
+    ## Episode end
+
+    Terminated: a collision or leaving the water (-10). Truncated: after ``episode_s`` (default 20 s).
+
+    ## Arguments
+
+    Those of ``MapTidal/GoToPose-v0``, and ``max_current_m_s=0.2``, ``turbulence_m_s=0.03``.
+
+    ## Version history
+
+    - v0: first version (maptidal 0.1).
+    """
+
+    GUST_TIME_CONSTANT_S = 2.0
+
+    def __init__(self, *args, max_current_m_s: float = 0.2, turbulence_m_s: float = 0.03, **kwargs) -> None:
+        if not (0 <= max_current_m_s <= 1.0 and math.isfinite(max_current_m_s)):
+            raise ValueError(f"max_current_m_s must be in [0, 1] m/s, got {max_current_m_s!r}")
+        if not (0 <= turbulence_m_s <= 0.5 and math.isfinite(turbulence_m_s)):
+            raise ValueError(f"turbulence_m_s must be in [0, 0.5] m/s, got {turbulence_m_s!r}")
+        self.max_current_m_s, self.turbulence_m_s = max_current_m_s, turbulence_m_s
+        super().__init__(*args, **kwargs)
+
+    def _task_spaces(self) -> dict[str, spaces.Space]:
+        return {"target": spaces.Box(-np.inf, np.inf, (4,), np.float32)}
+
+    def _task_observation(self) -> dict[str, np.ndarray]:
+        return {"target": self._relative_target(self.target, self.target_yaw)}
+
+    def _start_episode(self) -> None:
+        start, yaw = self._sample_pose()
+        self.sim.place(self.robot, start, yaw)
+        self.target, self.target_yaw = start, yaw
+        heading = self.np_random.uniform(-math.pi, math.pi)
+        speed = self.np_random.uniform(0.0, self.max_current_m_s)
+        self.mean_current = speed * np.array([math.cos(heading), math.sin(heading), 0.0])
+        self.gust = np.zeros(3)
+        self.sim.set_current(self.mean_current)
+
+    def _before_substep(self) -> None:
+        if self.turbulence_m_s <= 0:
+            return
+        dt = self.scenario.control_period_s
+        decay = math.exp(-dt / self.GUST_TIME_CONSTANT_S)
+        noise = self.np_random.normal(size=3) * self.turbulence_m_s * math.sqrt(1 - decay * decay)
+        self.gust = decay * self.gust + noise
+        self.sim.set_current(self.mean_current + self.gust)
+
+    def _reward(self, truth: dict) -> tuple[float, bool, dict]:
+        distance = float(np.linalg.norm(np.asarray(truth["position"]) - self.target))
+        yaw_error = abs(wrap_angle(self.target_yaw - truth["rpy"][2]))
+        within = distance <= POSITION_TOLERANCE_M and yaw_error <= YAW_TOLERANCE_RAD
+        reward = -distance - 0.5 * yaw_error - 0.05 * self._energy + (1.0 if within else 0.0)
+        terminated = bool(self.sim.contacts() or self._out_of_bounds(truth))
+        if terminated:
+            reward -= 10.0
+        info = {"is_success": within, "distance_m": distance, "current_m_s": self.mean_current.tolist()}
+        return reward, terminated, info

@@ -1,0 +1,112 @@
+"""``MapTidal/TankInspection-v0``: one robot inspects the OSB tank's walls with its camera."""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+from gymnasium import spaces
+
+from envs.gym.core import SAFE_BOX, MapTidalEnv
+from maptidal.coverage import CoverageModel, CoverageParams
+
+SECTORS = 8  # coverage summary: the evaluated walls in eight sectors around the tank's centre line
+REWARD_PER_VOXEL = 0.01
+
+
+class TankInspectionEnv(MapTidalEnv):
+    """One BlueROV2 looks at as much of the tank's evaluated walls as it can.
+
+    ## Action space
+
+    As ``MapTidal/GoToPose-v0``: ``Box(-1, 1, (6,), float32)`` pilot commands through STABILIZE, or
+    ``action="thrusters"``.
+
+    ## Observation space
+
+    pose, velocity, depth and imu as in ``MapTidal/GoToPose-v0`` (estimated, from the robot's sensors),
+    optional images, and:
+
+    | key | shape | content | unit |
+    |---|---|---|---|
+    | coverage | 9 | share of the evaluated wall voxels seen so far, then per sector | 0..1 |
+
+    The 8 sectors split the walls by bearing from (-1.5, 0), a point on the tank's centre line.
+
+    ## Rewards
+
+    Per step: ``0.01 x`` the wall voxels newly seen by the robot's camera (the OAK-D frustum, 2 m range,
+    with occlusion, counted by :class:`maptidal.coverage.CoverageModel` on 5 cm voxels, from the true
+    camera pose), ``- 0.05 x`` the mean squared thruster command. Looking again at seen voxels earns
+    nothing.
+
+    ## Starting state
+
+    A random position in the tank's safe box, facing the end wall within +-60 deg, at rest; what the
+    camera sees there counts as seen.
+
+    ## Episode end
+
+    Terminated: a collision or leaving the water or the evaluated region (-10). Truncated: after
+    ``episode_s`` (default 60 s). ``info["coverage"]`` is the share seen.
+
+    ## Arguments
+
+    Those of ``MapTidal/GoToPose-v0`` (``episode_s`` defaults to 60 s here), and ``voxel_m=0.05``.
+
+    ## Version history
+
+    - v0: first version (maptidal 0.1).
+    """
+
+    def __init__(self, *args, voxel_m: float = 0.05, episode_s: float = 60.0, **kwargs) -> None:
+        super().__init__(*args, episode_s=episode_s, **kwargs)
+        self.coverage = CoverageModel.from_tank(
+            self.scenario.tank, CoverageParams(voxel_m=voxel_m, occlusion=True)
+        )
+        centre = np.array([-1.5, 0.0])
+        bearings = np.arctan2(*(self.coverage.voxels[:, :2] - centre).T[::-1])
+        edges = np.linspace(bearings.min(), bearings.max() + 1e-9, SECTORS + 1)
+        self._sector = np.clip(np.searchsorted(edges, bearings, side="right") - 1, 0, SECTORS - 1)
+        self._sector_size = np.maximum(np.bincount(self._sector, minlength=SECTORS), 1)
+        self.seen = np.zeros(len(self.coverage.voxels), bool)
+
+    def _task_spaces(self) -> dict[str, spaces.Space]:
+        return {"coverage": spaces.Box(0.0, 1.0, (SECTORS + 1,), np.float32)}
+
+    def _task_observation(self) -> dict[str, np.ndarray]:
+        if not hasattr(self, "seen"):
+            return {"coverage": np.zeros(SECTORS + 1)}
+        per_sector = np.bincount(self._sector[self.seen], minlength=SECTORS) / self._sector_size
+        return {"coverage": np.r_[self.seen.mean(), per_sector]}
+
+    def viewpoint(self, truth: dict) -> np.ndarray:
+        """The true camera viewpoint row (position, viewing direction) of the robot."""
+        matrix = np.zeros(9)
+        mujoco.mju_quat2Mat(matrix, np.asarray(truth["quaternion"], float))
+        rotation = matrix.reshape(3, 3)
+        camera = np.asarray(truth["position"]) + rotation @ np.asarray(self.vehicle.sensors.camera_position)
+        return np.r_[camera, rotation[:, 0]]
+
+    def _look(self, truth: dict) -> int:
+        views = self.coverage.views(self.viewpoint(truth)[None, :])
+        new = (views > 0) & ~self.seen
+        self.seen |= new
+        return int(new.sum())
+
+    def _start_episode(self) -> None:
+        low, high = SAFE_BOX
+        start = self.np_random.uniform(low, high)
+        yaw = float(self.np_random.uniform(-math.pi / 3, math.pi / 3))
+        self.sim.place(self.robot, start, yaw)
+        self.seen = np.zeros(len(self.coverage.voxels), bool)
+        self._look(self.sim.ground_truth(self.robot))
+
+    def _reward(self, truth: dict) -> tuple[float, bool, dict]:
+        new = self._look(truth)
+        reward = REWARD_PER_VOXEL * new - 0.05 * self._energy
+        terminated = bool(self.sim.contacts() or self._out_of_bounds(truth))
+        if terminated:
+            reward -= 10.0
+        return reward, terminated, {"new_voxels": new, "coverage": float(self.seen.mean())}

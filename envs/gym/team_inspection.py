@@ -1,0 +1,275 @@
+"""``MapTidal/TeamInspection-v0``: N robots share the inspection of the tank; and a PettingZoo
+``ParallelEnv`` adapter of it (:func:`parallel_env`), the multi-agent convention."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import gymnasium
+import mujoco
+import numpy as np
+from gymnasium import spaces
+
+from controllers.estimation import DeadReckoning, EstimatorParams
+from envs.gym.core import SAFE_BOX, EnvOptions
+from envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS
+from envs.scenario import Scenario, load_scenario, with_frame
+from envs.simulation import Simulation
+from envs.world import DEPTH_SENSOR_POSITION
+from maptidal.coverage import CoverageModel, CoverageParams
+
+MAX_ROBOTS = 4
+MIN_SEPARATION_M = 0.9  # start poses at least this far apart (a Heavy is 0.58 m wide)
+
+
+class TeamInspectionEnv(gymnasium.Env):
+    """N BlueROV2s (default 2) inspect the tank's evaluated walls together and share the reward.
+
+    ## Action space
+
+    ``Dict`` keyed by robot name (``rov0``, ``rov1``, ...), each ``Box(-1, 1, (6,), float32)``: the pilot
+    command of ``controllers/convention.py`` through STABILIZE (or per-thruster commands with
+    ``action="thrusters"``).
+
+    ## Observation space
+
+    ``Dict`` keyed by robot name; each robot's entry is the Dict of ``MapTidal/TankInspection-v0``
+    (pose, velocity, depth, imu, from that robot's own sensors) with ``coverage`` the team's share seen,
+    overall and per sector, and ``others``: the other robots' true positions relative to this robot's
+    estimate (m, world axes, ``3 x (N - 1)``; what an acoustic position exchange would give). With
+    ``flat_obs=True`` each robot's entry is one Box.
+
+    ## Rewards
+
+    Shared by all robots, per step: ``0.01 x`` the wall voxels newly seen by any robot's camera (with
+    occlusion), ``- 0.05 x`` the robots' mean squared thruster command, ``-10`` on a collision (with the
+    tank or each other) or when a robot leaves the water.
+
+    ## Starting state
+
+    Random positions in the tank's safe box, at least 0.9 m apart, facing the end wall within +-60 deg.
+
+    ## Episode end
+
+    Terminated: any collision or a robot out of the water. Truncated: after ``episode_s`` (60 s).
+
+    ## Arguments
+
+    ``n_robots=2`` (1 to 4), and those of ``MapTidal/GoToPose-v0`` (``episode_s`` defaults to 60 s).
+
+    ## Version history
+
+    - v0: first version (maptidal 0.1). The ``action="tasks"`` mode (pick the next task, flown by
+      go-to-pose) is not there yet.
+    """
+
+    metadata = {"render_modes": [], "render_fps": 10}  # noqa: RUF012 (Gymnasium's convention)
+
+    def __init__(
+        self, n_robots: int = 2, scenario: Scenario | str | None = None, episode_s: float = 60.0, **options
+    ):
+        if not (isinstance(n_robots, int) and 1 <= n_robots <= MAX_ROBOTS):
+            raise ValueError(f"n_robots must be an integer from 1 to {MAX_ROBOTS}, got {n_robots!r}")
+        known = {f.name for f in dataclasses.fields(EnvOptions)}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise ValueError(f"unknown option(s) {unknown}; the options are {sorted(known | {'n_robots'})}")
+        self.options = EnvOptions(episode_s=episode_s, **options)
+        if self.options.obs_images is not None:
+            raise ValueError("the team environment has no image observations yet")
+        base = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        base = with_frame(base, self.options.frame)
+        template = base.robots[0]
+        robots = tuple(
+            dataclasses.replace(template, name=f"rov{k}", position=(-1.5 - 0.9 * k, 0.0, 1.0))
+            for k in range(n_robots)
+        )
+        self.scenario = dataclasses.replace(base, robots=robots)
+        flight_mode = "stabilize" if self.options.action == "pilot" else "manual"
+        self.sim = Simulation(self.scenario, flight_mode=flight_mode)
+        self.agents = list(self.sim.robots)
+        self.vehicle = template.vehicle
+        self.substeps = max(1, round(self.options.control_period_s / self.scenario.control_period_s))
+        self.max_steps = max(
+            1, round(self.options.episode_s / (self.substeps * self.scenario.control_period_s))
+        )
+        n_actions = self.vehicle.n_thrusters if self.options.action == "thrusters" else 6
+        self.action_space = spaces.Dict(
+            {name: spaces.Box(-1.0, 1.0, (n_actions,), np.float32) for name in self.agents}
+        )
+        box = lambda n: spaces.Box(-np.inf, np.inf, (n,), np.float32)  # noqa: E731
+        self._entry_spaces = {
+            "pose": box(6),
+            "velocity": box(6),
+            "depth": box(1),
+            "imu": box(6),
+            "coverage": spaces.Box(0.0, 1.0, (SECTORS + 1,), np.float32),
+            "others": box(3 * (n_robots - 1)),
+        }
+        if self.options.flat_obs:
+            size = sum(space.shape[0] for space in self._entry_spaces.values())
+            per_robot = box(size)
+        else:
+            per_robot = spaces.Dict(self._entry_spaces)
+        self.observation_space = spaces.Dict({name: per_robot for name in self.agents})
+        self.coverage = CoverageModel.from_tank(self.scenario.tank, CoverageParams(occlusion=True))
+        centre = np.array([-1.5, 0.0])
+        bearings = np.arctan2(*(self.coverage.voxels[:, :2] - centre).T[::-1])
+        edges = np.linspace(bearings.min(), bearings.max() + 1e-9, SECTORS + 1)
+        self._sector = np.clip(np.searchsorted(edges, bearings, side="right") - 1, 0, SECTORS - 1)
+        self._sector_size = np.maximum(np.bincount(self._sector, minlength=SECTORS), 1)
+        self.seen = np.zeros(len(self.coverage.voxels), bool)
+        self._estimators: dict[str, DeadReckoning] = {}
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start an episode (``seed`` seeds poses and all noise)."""
+        super().reset(seed=seed)
+        self.sim.reset(seed=int(self.np_random.integers(2**31 - 1)))
+        self._steps = 0
+        low, high = SAFE_BOX
+        placed: list[np.ndarray] = []
+        for name in self.agents:
+            for _ in range(200):
+                position = self.np_random.uniform(low, high)
+                if all(np.linalg.norm(position - other) >= MIN_SEPARATION_M for other in placed):
+                    break
+            placed.append(position)
+            self.sim.place(name, position, float(self.np_random.uniform(-math.pi / 3, math.pi / 3)))
+        params = EstimatorParams(
+            self.scenario.tank.height, DEPTH_SENSOR_POSITION, self.vehicle.sensors.dvl_position
+        )
+        self._estimators, self._estimates, self._readings = {}, {}, {}
+        for name in self.agents:
+            truth = self.sim.ground_truth(name)
+            self._estimators[name] = DeadReckoning(params, truth["position"], truth["rpy"][2])
+            self._readings[name] = self.sim.sensors(name)
+            self._estimates[name] = self._estimators[name].update(
+                self._readings[name], self.scenario.control_period_s
+            )
+        self.seen = np.zeros(len(self.coverage.voxels), bool)
+        self._look()
+        return self._observation(), {}
+
+    def step(self, action):
+        """Hold each robot's action for one control period; one shared reward."""
+        if not isinstance(action, dict) or set(action) != set(self.agents):
+            raise ValueError(f"action must be a dict with one entry per robot {self.agents}")
+        commands = {}
+        for name in self.agents:
+            value = np.asarray(action[name], float)
+            if value.shape != self.action_space[name].shape or not np.all(np.isfinite(value)):
+                raise ValueError(f"{name}: action must be {self.action_space[name].shape} finite values")
+            commands[name] = np.clip(value, -1.0, 1.0)
+        mode = "thrusters" if self.options.action == "thrusters" else "pilot"
+        energy = 0.0
+        for _ in range(self.substeps):
+            self.sim.step(commands, mode=mode)
+            for name in self.agents:
+                self._readings[name] = self.sim.sensors(name)
+                self._estimates[name] = self._estimators[name].update(
+                    self._readings[name], self.scenario.control_period_s
+                )
+                energy += float(np.mean(self.sim.thruster_outputs(name) ** 2))
+        self._steps += 1
+        new = self._look()
+        reward = REWARD_PER_VOXEL * new - 0.05 * energy / (self.substeps * len(self.agents))
+        truths = [self.sim.ground_truth(name)["position"] for name in self.agents]
+        out = any(z > self.scenario.tank.height - 0.15 or z < 0.15 or x < -6.0 for x, _, z in truths)
+        terminated = bool(self.sim.contacts() or out)
+        if terminated:
+            reward -= 10.0
+        truncated = not terminated and self._steps >= self.max_steps
+        info = {"new_voxels": new, "coverage": float(self.seen.mean())}
+        return self._observation(), float(reward), terminated, bool(truncated), info
+
+    def _look(self) -> int:
+        viewpoints = []
+        for name in self.agents:
+            truth = self.sim.ground_truth(name)
+            matrix = np.zeros(9)
+            mujoco.mju_quat2Mat(matrix, np.asarray(truth["quaternion"], float))
+            rotation = matrix.reshape(3, 3)
+            camera = np.asarray(truth["position"]) + rotation @ np.asarray(
+                self.vehicle.sensors.camera_position
+            )
+            viewpoints.append(np.r_[camera, rotation[:, 0]])
+        views = self.coverage.views(np.array(viewpoints))
+        new = (views > 0) & ~self.seen
+        self.seen |= new
+        return int(new.sum())
+
+    def _observation(self) -> dict:
+        per_sector = np.bincount(self._sector[self.seen], minlength=SECTORS) / self._sector_size
+        coverage = np.r_[self.seen.mean(), per_sector]
+        positions = {name: np.asarray(self.sim.ground_truth(name)["position"]) for name in self.agents}
+        out = {}
+        for name in self.agents:
+            e, readings = self._estimates[name], self._readings[name]
+            others = [positions[other] - e.position for other in self.agents if other != name]
+            entry = {
+                "pose": np.r_[e.position, e.rpy],
+                "velocity": np.r_[e.velocity_body, e.angular_velocity_body],
+                "depth": np.array([readings.get("depth", {}).get("depth_m", 0.0)]),
+                "imu": np.r_[readings["imu"]["accel"], readings["imu"]["gyro"]],
+                "coverage": coverage,
+                "others": np.concatenate(others) if others else np.zeros(0),
+            }
+            entry = {key: np.asarray(value, np.float32) for key, value in entry.items()}
+            out[name] = (
+                np.concatenate([entry[k] for k in self._entry_spaces]) if self.options.flat_obs else entry
+            )
+        return out
+
+    def close(self) -> None:
+        """Free the simulation's renderer."""
+        self.sim.close()
+
+
+def parallel_env(**kwargs):
+    """TeamInspection as a PettingZoo ``ParallelEnv`` (needs the optional ``pettingzoo`` package): each
+    robot is an agent with its own observation and action spaces; every agent gets the shared reward."""
+    from pettingzoo import ParallelEnv
+
+    class TeamInspectionParallel(ParallelEnv):
+        """PettingZoo view of :class:`TeamInspectionEnv` (same arguments)."""
+
+        metadata = {"name": "maptidal_team_inspection_v0", "render_modes": []}  # noqa: RUF012
+
+        def __init__(self, **options) -> None:
+            self.env = TeamInspectionEnv(**options)
+            self.possible_agents = list(self.env.agents)
+            self.agents: list[str] = []
+
+        def observation_space(self, agent: str):
+            return self.env.observation_space[agent]
+
+        def action_space(self, agent: str):
+            return self.env.action_space[agent]
+
+        def reset(self, seed: int | None = None, options: dict | None = None):
+            observations, _ = self.env.reset(seed=seed, options=options)
+            self.agents = list(self.possible_agents)
+            return observations, {agent: {} for agent in self.agents}
+
+        def step(self, actions: dict):
+            full = {
+                agent: actions.get(agent, np.zeros(self.env.action_space[agent].shape))
+                for agent in self.possible_agents
+            }
+            observations, reward, terminated, truncated, info = self.env.step(full)
+            agents = list(self.agents)
+            if terminated or truncated:
+                self.agents = []
+            return (
+                {agent: observations[agent] for agent in agents},
+                dict.fromkeys(agents, reward),
+                dict.fromkeys(agents, terminated),
+                dict.fromkeys(agents, truncated),
+                {agent: dict(info) for agent in agents},
+            )
+
+        def close(self) -> None:
+            self.env.close()
+
+    return TeamInspectionParallel(**kwargs)

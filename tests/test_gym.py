@@ -1,0 +1,271 @@
+"""The Gymnasium environments: Gymnasium's own checker, vectorisation, seeding, rewards on hand-made
+cases, bad arguments, and learnability by a numpy-only cross-entropy method."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import envs  # noqa: F401  (registers the MapTidal/ environments)
+
+ENV_IDS = ("MapTidal/GoToPose-v0", "MapTidal/StationKeeping-v0", "MapTidal/TankInspection-v0")
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+@pytest.mark.parametrize(
+    "options", [{}, {"flat_obs": True}, {"action": "thrusters"}, {"obs_images": "stereo"}]
+)
+def test_gymnasium_check_env_passes(env_id, options):
+    env = gymnasium.make(env_id, **options)
+    try:
+        check_env(env.unwrapped)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("mode", ["sync", "async"])
+def test_environments_vectorise(mode):
+    envs_ = gymnasium.make_vec("MapTidal/GoToPose-v0", num_envs=2, vectorization_mode=mode, flat_obs=True)
+    try:
+        observations, _ = envs_.reset(seed=3)
+        assert observations.shape == (2, envs_.single_observation_space.shape[0])
+        assert not np.allclose(observations[0], observations[1])  # each copy its own episode
+        for _ in range(3):
+            observations, rewards, *_ = envs_.step(envs_.action_space.sample())
+        assert rewards.shape == (2,) and np.all(np.isfinite(observations))
+    finally:
+        envs_.close()
+
+
+def _trajectory(env, seed: int, steps: int = 15) -> np.ndarray:
+    observation, _ = env.reset(seed=seed)
+    actions = np.random.default_rng(0).uniform(-0.5, 0.5, (steps, 6)).astype(np.float32)
+    rows = [observation]
+    for action in actions:
+        observation, *_ = env.step(action)
+        rows.append(observation)
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_the_same_seed_and_actions_give_the_same_trajectory(env_id):
+    env = gymnasium.make(env_id, flat_obs=True)
+    try:
+        first, again, other = _trajectory(env, 11), _trajectory(env, 11), _trajectory(env, 12)
+    finally:
+        env.close()
+    np.testing.assert_array_equal(first, again)
+    assert not np.allclose(first, other)
+
+
+def _toward(observation, sign: float = 1.0) -> np.ndarray:
+    forward, left, up, yaw_error = observation["target"]
+    command = np.array([forward, -left, up, 0.0, 0.0, -yaw_error]) * sign
+    return np.clip(2.0 * command, -1, 1).astype(np.float32)
+
+
+def test_moving_towards_the_target_earns_more_than_moving_away():
+    env = gymnasium.make("MapTidal/GoToPose-v0")
+    try:
+        totals = []
+        for sign in (1.0, -1.0):
+            observation, _ = env.reset(seed=5)
+            total = 0.0
+            for _ in range(15):
+                observation, reward, terminated, *_ = env.step(_toward(observation, sign))
+                total += reward
+                if terminated:
+                    break
+            totals.append(total)
+    finally:
+        env.close()
+    assert totals[0] > 0 > totals[1]
+
+
+def test_a_collision_is_penalised_and_ends_the_episode():
+    env = gymnasium.make("MapTidal/GoToPose-v0")
+    try:
+        env.reset(seed=2)
+        inner = env.unwrapped
+        inner.sim.place(inner.robot, [-0.45, 0.0, 1.0], 0.0)  # nose 0.2 m from the end wall, facing it
+        for _ in range(30):
+            _, reward, terminated, truncated, _ = env.step(np.array([1, 0, 0, 0, 0, 0], np.float32))
+            if terminated or truncated:
+                break
+        assert terminated and reward < -5
+        assert inner.sim.contacts()
+    finally:
+        env.close()
+
+
+def test_station_keeping_currents_vary_per_episode_and_push_an_idle_robot():
+    env = gymnasium.make("MapTidal/StationKeeping-v0", turbulence_m_s=0.0)
+    try:
+        currents = []
+        for seed in (1, 2):
+            env.reset(seed=seed)
+            currents.append(np.array(env.unwrapped.mean_current))
+        assert not np.allclose(currents[0], currents[1])
+        env.reset(seed=4)
+        current = env.unwrapped.mean_current
+        start = np.array(env.unwrapped.target)
+        for _ in range(30):
+            *_, info = env.step(np.zeros(6, np.float32))
+        drift = np.array(env.unwrapped.sim.ground_truth(env.unwrapped.robot)["position"]) - start
+        assert np.linalg.norm(current) > 0.05
+        assert drift[:2] @ current[:2] > 0  # carried along with the water
+        assert info["distance_m"] > 0.05
+    finally:
+        env.close()
+
+
+def test_inspection_pays_for_new_views_and_nothing_for_looking_again():
+    env = gymnasium.make("MapTidal/TankInspection-v0")
+    try:
+        observation, _ = env.reset(seed=1)
+        start = observation["coverage"][0]
+        assert start > 0  # what the camera sees at the start is seen
+        still = [env.step(np.zeros(6, np.float32))[1] for _ in range(3)]
+        assert max(still) < 0.05  # the same view again: (almost) nothing new
+        turning = [env.step(np.array([0, 0, 0, 0, 0, 0.6], np.float32)) for _ in range(10)]
+        assert sum(step[1] for step in turning) > 1.0  # new wall comes into view
+        observation, info = turning[-1][0], turning[-1][4]
+        assert observation["coverage"][0] == pytest.approx(info["coverage"]) and info["coverage"] > start
+        inner = env.unwrapped
+        seen = inner.seen.copy()
+        assert inner._look(inner.sim.ground_truth(inner.robot)) == 0  # looking again adds nothing
+        np.testing.assert_array_equal(inner.seen, seen)
+    finally:
+        env.close()
+
+
+def test_rgb_array_rendering_shows_the_robot_with_its_camera_inset():
+    env = gymnasium.make("MapTidal/GoToPose-v0", render_mode="rgb_array")
+    try:
+        env.reset(seed=0)
+        frame = env.render()
+    finally:
+        env.close()
+    assert frame.shape == (240, 320, 3) and frame.dtype == np.uint8
+    inset, rest = frame[4:84, 212:316], frame[120:, :200]
+    assert inset.std() > 1 and rest.std() > 1 and not np.allclose(inset.mean(), rest.mean(), atol=0.5)
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"warp_drive": True}, "unknown option"),
+        ({"image_size": (0, 64), "obs_images": "left"}, "image_size"),
+        ({"action": "joystick"}, "action must be"),
+        ({"obs_images": "left", "flat_obs": True}, "flat_obs cannot carry images"),
+        ({"render_mode": "vr"}, "render_mode"),
+        ({"frame": "bluerov3"}, "frame"),
+    ],
+)
+def test_bad_arguments_give_a_clear_error(options, message):
+    with pytest.raises(ValueError, match=message):
+        gymnasium.make("MapTidal/GoToPose-v0", **options)
+    env = gymnasium.make("MapTidal/GoToPose-v0")
+    try:
+        env.reset(seed=0)
+        with pytest.raises(ValueError, match="finite"):
+            env.step(np.array([math.nan, 0, 0, 0, 0, 0], np.float32))
+    finally:
+        env.close()
+
+
+# ----- learnability, numpy only -----------------------------------------------------------------
+def _linear_policy(theta: np.ndarray, observation) -> np.ndarray:
+    """One gain per axis on the target offset (forward, left, up, yaw error) and one on the matching
+    velocity (u, v, w, r): a linear policy of the observation with few enough parameters for CEM."""
+    target = observation["target"]
+    velocity = observation["velocity"][[0, 1, 2, 5]]
+    axes = theta[:4] * target + theta[4:] * velocity
+    return np.clip([axes[0], axes[1], axes[2], 0.0, 0.0, axes[3]], -1, 1).astype(np.float32)
+
+
+def _episode(env, theta, seed) -> tuple[float, bool]:
+    observation, _ = env.reset(seed=seed)
+    total, reached = 0.0, False
+    while True:
+        observation, reward, terminated, truncated, info = env.step(_linear_policy(theta, observation))
+        total += reward
+        reached |= info["is_success"]
+        if terminated or truncated:
+            return total, reached
+
+
+def test_a_linear_policy_trained_by_the_cross_entropy_method_reaches_the_target():
+    """The reward and the observations carry the signal: from zero gains, six CEM generations of 16
+    (one common episode each) find a policy that reaches the pose in most new episodes."""
+    env = gymnasium.make("MapTidal/GoToPose-v0", episode_s=8.0)
+    rng = np.random.default_rng(0)
+    mean, std = np.zeros(8), np.ones(8)
+    try:
+        for generation in range(6):
+            population = mean + std * rng.normal(size=(16, 8))
+            scores = [_episode(env, theta, 1000 + generation)[0] for theta in population]
+            elite = population[np.argsort(scores)[-4:]]
+            mean, std = elite.mean(axis=0), elite.std(axis=0) + 0.05
+        reached = [_episode(env, mean, 5000 + k)[1] for k in range(10)]
+    finally:
+        env.close()
+    assert sum(reached) >= 7, reached
+
+
+# ----- the team task and PettingZoo -----------------------------------------------------------------
+def test_team_inspection_passes_the_checkers_of_gymnasium_and_pettingzoo():
+    from pettingzoo.test import parallel_api_test
+
+    from envs.gym.team_inspection import parallel_env
+
+    env = gymnasium.make("MapTidal/TeamInspection-v0")
+    try:
+        check_env(env.unwrapped)
+    finally:
+        env.close()
+    parallel = parallel_env(n_robots=3, flat_obs=True)
+    try:
+        parallel_api_test(parallel, num_cycles=20)
+    finally:
+        parallel.close()
+
+
+def test_the_team_shares_one_reward_for_what_any_robot_sees():
+    env = gymnasium.make("MapTidal/TeamInspection-v0", n_robots=2)
+    try:
+        observations, _ = env.reset(seed=7)
+        assert set(observations) == {"rov0", "rov1"}
+        np.testing.assert_array_equal(observations["rov0"]["coverage"], observations["rov1"]["coverage"])
+        inner = env.unwrapped
+        one = inner.coverage.views(np.array([_viewpoint(inner, "rov0")])) > 0
+        two = inner.coverage.views(np.array([_viewpoint(inner, "rov1")])) > 0
+        assert inner.seen.sum() == (one | two).sum() > one.sum()  # the team sees the union
+        idle = {name: np.zeros(6, np.float32) for name in inner.agents}
+        turn = {"rov0": np.array([0, 0, 0, 0, 0, 0.6], np.float32), "rov1": np.zeros(6, np.float32)}
+        still = env.step(idle)[1]
+        turning = sum(env.step(turn)[1] for _ in range(8))
+        assert still < 0.05 < turning
+    finally:
+        env.close()
+
+
+def _viewpoint(inner, name):
+    import mujoco
+
+    truth = inner.sim.ground_truth(name)
+    matrix = np.zeros(9)
+    mujoco.mju_quat2Mat(matrix, np.asarray(truth["quaternion"], float))
+    rotation = matrix.reshape(3, 3)
+    camera = np.asarray(truth["position"]) + rotation @ np.asarray(inner.vehicle.sensors.camera_position)
+    return np.r_[camera, rotation[:, 0]]
+
+
+@pytest.mark.parametrize("bad", [0, 5, 1.5, "two"])
+def test_a_bad_robot_count_is_refused(bad):
+    with pytest.raises(ValueError, match="n_robots"):
+        gymnasium.make("MapTidal/TeamInspection-v0", n_robots=bad)
