@@ -8,6 +8,8 @@ import math
 import gymnasium
 import numpy as np
 import pytest
+from absl.testing import absltest
+from dm_env import test_utils
 from gymnasium.utils.env_checker import check_env
 
 import envs  # noqa: F401  (registers the MapTidal/ environments)
@@ -269,3 +271,42 @@ def _viewpoint(inner, name):
 def test_a_bad_robot_count_is_refused(bad):
     with pytest.raises(ValueError, match="n_robots"):
         gymnasium.make("MapTidal/TeamInspection-v0", n_robots=bad)
+
+
+# ----- dm_control ---------------------------------------------------------------------------------
+class GoToPoseDmEnvTest(test_utils.EnvironmentTestMixin, absltest.TestCase):
+    """dm_env's own conformance tests on the dm_control version of GoToPose."""
+
+    def make_object_under_test(self):
+        from envs.gym.dm_tasks import load
+
+        return load("go_to_pose", seed=3, episode_s=2.0)
+
+
+class TankInspectionDmEnvTest(test_utils.EnvironmentTestMixin, absltest.TestCase):
+    """The same on TankInspection."""
+
+    def make_object_under_test(self):
+        from envs.gym.dm_tasks import load
+
+        return load("tank_inspection", seed=3, episode_s=2.0)
+
+
+def test_the_dm_control_task_shares_the_gymnasium_tasks_world_and_rewards():
+    from envs.gym.dm_tasks import load
+
+    env = load("go_to_pose", seed=5)
+    task_env = env.task.task_env
+    assert env.physics.data.ptr is task_env.sim.data  # one MjData, not a second world
+    first = env.reset()
+    towards = []
+    observation = first.observation
+    for _ in range(10):
+        forward, left, up, yaw_error = observation["target"]
+        step = env.step(np.clip(2.0 * np.array([forward, -left, up, 0, 0, -yaw_error]), -1, 1))
+        towards.append(step.reward)
+        observation = step.observation
+    assert sum(towards) > 0
+    assert env.physics.data.time == pytest.approx(10 * task_env.dt)
+    with pytest.raises(ValueError, match="unknown task"):
+        load("backflip")

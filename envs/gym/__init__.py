@@ -11,6 +11,8 @@
 
     import gymnasium, envs
     env = gymnasium.make("MapTidal/GoToPose-v0")
+
+The same tasks as dm_control environments: :func:`envs.gym.dm_tasks.load`.
 """
 
 from __future__ import annotations

@@ -153,6 +153,14 @@ class MapTidalEnv(gymnasium.Env):
 
     def step(self, action):
         """Hold ``action`` for one control period (``control_period_s``)."""
+        self._act(action)
+        truth = self.sim.ground_truth(self.robot)
+        reward, terminated, info = self._reward(truth)
+        truncated = not terminated and self._steps >= self.max_steps
+        return self._observation(), float(reward), bool(terminated), bool(truncated), info
+
+    def _act(self, action) -> None:
+        """Check ``action`` and fly it for one control period (the physics, the sensors, the estimate)."""
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {a.shape}")
@@ -169,10 +177,6 @@ class MapTidalEnv(gymnasium.Env):
             energy += float(np.mean(self.sim.thruster_outputs(self.robot) ** 2))
         self._energy = energy / self.substeps
         self._steps += 1
-        truth = self.sim.ground_truth(self.robot)
-        reward, terminated, info = self._reward(truth)
-        truncated = not terminated and self._steps >= self.max_steps
-        return self._observation(), float(reward), bool(terminated), bool(truncated), info
 
     def _before_substep(self) -> None:
         """Hook for tasks that change the water while the episode runs."""
