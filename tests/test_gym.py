@@ -153,7 +153,7 @@ def test_rgb_array_rendering_shows_the_robot_with_its_camera_inset():
     finally:
         env.close()
     assert frame.shape == (240, 320, 3) and frame.dtype == np.uint8
-    inset, rest = frame[4:84, 212:316], frame[120:, :200]
+    inset, rest = frame[4:84, 216:316], frame[120:, :200]
     assert inset.std() > 1 and rest.std() > 1 and not np.allclose(inset.mean(), rest.mean(), atol=0.5)
 
 
@@ -267,6 +267,18 @@ def _viewpoint(inner, name):
     return np.r_[camera, rotation[:, 0]]
 
 
+def test_the_team_renders_with_every_robots_camera_inset():
+    env = gymnasium.make("MapTidal/TeamInspection-v0", render_mode="rgb_array")
+    try:
+        env.reset(seed=0)
+        frame = env.render()
+    finally:
+        env.close()
+    assert frame.shape == (240, 320, 3)
+    first, second = frame[4:64, 236:316], frame[4:64, 152:232]  # two insets of 80 x 60
+    assert first.std() > 1 and second.std() > 1 and not np.array_equal(first, second)
+
+
 @pytest.mark.parametrize("bad", [0, 5, 1.5, "two"])
 def test_a_bad_robot_count_is_refused(bad):
     with pytest.raises(ValueError, match="n_robots"):
@@ -310,3 +322,28 @@ def test_the_dm_control_task_shares_the_gymnasium_tasks_world_and_rewards():
     assert env.physics.data.time == pytest.approx(10 * task_env.dt)
     with pytest.raises(ValueError, match="unknown task"):
         load("backflip")
+
+
+def test_the_team_can_pick_tasks_that_go_to_pose_flies():
+    env = gymnasium.make("MapTidal/TeamInspection-v0", action="tasks")
+    try:
+        assert env.action_space["rov0"] == gymnasium.spaces.Discrete(20)
+        observations, _ = env.reset(seed=0)
+        before = env.unwrapped.seen.mean()
+        observations, reward, terminated, _, info = env.step({"rov0": 3, "rov1": 7})  # far apart
+        assert info["status"] == {"rov0": "capture", "rov1": "capture"} and not terminated
+        assert observations["rov0"]["tasks_done"][[3, 7]].tolist() == [1.0, 1.0]
+        assert info["coverage"] > before and reward > 0
+        truth = env.unwrapped.sim.ground_truth("rov0")["position"]
+        assert np.linalg.norm(np.asarray(truth) - env.unwrapped.tasks[3, :3]) < 0.2  # really flown there
+        _, again, *_ = env.step({"rov0": 3, "rov1": 7})  # the same views again: only the time is paid
+        assert again < 0
+        with pytest.raises(ValueError, match="task index"):
+            env.step({"rov0": 20, "rov1": 0})
+    finally:
+        env.close()
+    quick = gymnasium.make("MapTidal/TeamInspection-v0", action="tasks", task_timeout_s=3.0)
+    try:
+        check_env(quick.unwrapped)
+    finally:
+        quick.close()

@@ -20,6 +20,7 @@ import numpy as np
 from gymnasium import spaces
 
 from controllers.estimation import DeadReckoning, EstimatorParams, rotation_from_rpy, wrap_angle
+from envs.rendering import CAMERA_SCENE_OPTION
 from envs.scenario import Scenario, load_scenario, with_frame
 from envs.simulation import Simulation
 from envs.world import DEPTH_SENSOR_POSITION
@@ -62,6 +63,28 @@ class EnvOptions:
             raise ValueError(f"episode_s must be at least one control period, got {self.episode_s}")
         if self.frame not in ("heavy", "standard"):
             raise ValueError(f"frame must be 'heavy' or 'standard', got {self.frame!r}")
+
+
+def third_person_frame(sim: Simulation, renderer: mujoco.Renderer, robots: list[str]) -> np.ndarray:
+    """A view from behind and above the first robot, with each robot's left camera image inset along
+    the top right (what ``render_mode="rgb_array"`` returns)."""
+    import cv2
+
+    camera = mujoco.MjvCamera()
+    camera.type = mujoco.mjtCamera.mjCAMERA_TRACKING
+    camera.trackbodyid = sim.model.body(f"{robots[0]}/base").id
+    camera.distance, camera.elevation, camera.azimuth = 2.5 + 0.5 * (len(robots) - 1), -20.0, 200.0
+    renderer.update_scene(sim.data, camera=camera, scene_option=CAMERA_SCENE_OPTION)  # no sonar rays
+    frame = renderer.render().copy()
+    height, width = frame.shape[:2]
+    size = (width // (2 + len(robots)), height // (2 + len(robots)))
+    right = width - 4
+    for robot in robots:
+        left, _ = sim.render_stereo(robot)
+        inset = cv2.resize(left, size, interpolation=cv2.INTER_AREA)
+        frame[4 : 4 + size[1], right - size[0] : right] = inset
+        right -= size[0] + 4
+    return frame
 
 
 def _has_display() -> bool:
@@ -257,21 +280,10 @@ class MapTidalEnv(gymnasium.Env):
             self._viewer.sync()
         return None
 
-    def _render_rgb(self, height: int = 240, width: int = 320) -> np.ndarray:
-        import cv2
-
+    def _render_rgb(self) -> np.ndarray:
         if self._renderer is None:
-            self._renderer = mujoco.Renderer(self.sim.model, height, width)
-        camera = mujoco.MjvCamera()
-        camera.type = mujoco.mjtCamera.mjCAMERA_TRACKING
-        camera.trackbodyid = self.sim.model.body(f"{self.robot}/base").id
-        camera.distance, camera.elevation, camera.azimuth = 2.5, -20.0, 200.0
-        self._renderer.update_scene(self.sim.data, camera=camera)
-        frame = self._renderer.render().copy()
-        left, _ = self.sim.render_stereo(self.robot)
-        inset = cv2.resize(left, (width // 3, height // 3), interpolation=cv2.INTER_AREA)
-        frame[4 : 4 + inset.shape[0], width - 4 - inset.shape[1] : width - 4] = inset
-        return frame
+            self._renderer = mujoco.Renderer(self.sim.model, 240, 320)
+        return third_person_frame(self.sim, self._renderer, [self.robot])
 
     def close(self) -> None:
         """Free the renderers and the viewer."""

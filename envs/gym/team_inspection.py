@@ -12,11 +12,14 @@ import numpy as np
 from gymnasium import spaces
 
 from controllers.estimation import DeadReckoning, EstimatorParams
-from envs.gym.core import SAFE_BOX, EnvOptions
+from controllers.pose import PoseController
+from controllers.task import TaskExecutor, TaskParams
+from envs.gym.core import SAFE_BOX, EnvOptions, third_person_frame
 from envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS
 from envs.scenario import Scenario, load_scenario, with_frame
 from envs.simulation import Simulation
 from envs.world import DEPTH_SENSOR_POSITION
+from maptidal.baselines import voronoi_viewpoints
 from maptidal.coverage import CoverageModel, CoverageParams
 
 MAX_ROBOTS = 4
@@ -31,6 +34,14 @@ class TeamInspectionEnv(gymnasium.Env):
     ``Dict`` keyed by robot name (``rov0``, ``rov1``, ...), each ``Box(-1, 1, (6,), float32)``: the pilot
     command of ``controllers/convention.py`` through STABILIZE (or per-thruster commands with
     ``action="thrusters"``).
+
+    ``action="tasks"``: each robot's entry is ``Discrete(N)``, the inspection task to fly next (the
+    Voronoi baseline's 20 viewpoints, :func:`task_poses`). One step flies every robot to its task with
+    ``controllers.task.TaskExecutor`` (go-to-pose on its own estimate, hold 0.1 m and 5 deg for a 1 s
+    dwell; ``task_timeout_s``, 30 s, if it cannot), and the observation adds ``tasks`` (the N poses x,
+    y, z, yaw) and ``tasks_done`` (1 for each task captured). The reward is then 0.01 per wall voxel
+    newly seen from where the robots end, minus 0.01 per second spent; the episode ends when every
+    task is done.
 
     ## Observation space
 
@@ -54,21 +65,41 @@ class TeamInspectionEnv(gymnasium.Env):
 
     Terminated: any collision or a robot out of the water. Truncated: after ``episode_s`` (60 s).
 
+    ## Rendering
+
+    ``render_mode="rgb_array"``: a view from behind the first robot with every robot's camera inset.
+
     ## Arguments
 
-    ``n_robots=2`` (1 to 4), and those of ``MapTidal/GoToPose-v0`` (``episode_s`` defaults to 60 s).
+    ``n_robots=2`` (1 to 4), ``action`` ("pilot", "thrusters" or "tasks"), ``task_timeout_s=30``, and
+    those of ``MapTidal/GoToPose-v0`` (``episode_s`` defaults to 60 s).
 
     ## Version history
 
-    - v0: first version (maptidal 0.1). The ``action="tasks"`` mode (pick the next task, flown by
-      go-to-pose) is not there yet.
+    - v0: first version (maptidal 0.1).
     """
 
-    metadata = {"render_modes": [], "render_fps": 10}  # noqa: RUF012 (Gymnasium's convention)
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012 (Gymnasium's convention)
 
     def __init__(
-        self, n_robots: int = 2, scenario: Scenario | str | None = None, episode_s: float = 60.0, **options
+        self,
+        n_robots: int = 2,
+        scenario: Scenario | str | None = None,
+        episode_s: float = 60.0,
+        task_timeout_s: float = 30.0,
+        render_mode: str | None = None,
+        **options,
     ):
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.render_mode = render_mode
+        self._renderer = None
+        self.tasks_mode = options.get("action") == "tasks"
+        if self.tasks_mode:
+            options = {**options, "action": "pilot"}
+        if not (math.isfinite(task_timeout_s) and task_timeout_s > 0):
+            raise ValueError(f"task_timeout_s must be a positive number of seconds, got {task_timeout_s!r}")
+        self.task_timeout_s = float(task_timeout_s)
         if not (isinstance(n_robots, int) and 1 <= n_robots <= MAX_ROBOTS):
             raise ValueError(f"n_robots must be an integer from 1 to {MAX_ROBOTS}, got {n_robots!r}")
         known = {f.name for f in dataclasses.fields(EnvOptions)}
@@ -94,10 +125,14 @@ class TeamInspectionEnv(gymnasium.Env):
         self.max_steps = max(
             1, round(self.options.episode_s / (self.substeps * self.scenario.control_period_s))
         )
-        n_actions = self.vehicle.n_thrusters if self.options.action == "thrusters" else 6
-        self.action_space = spaces.Dict(
-            {name: spaces.Box(-1.0, 1.0, (n_actions,), np.float32) for name in self.agents}
-        )
+        self.tasks = task_poses(self.scenario.tank, self.vehicle.sensors.camera_position)
+        if self.tasks_mode:
+            self.action_space = spaces.Dict({name: spaces.Discrete(len(self.tasks)) for name in self.agents})
+        else:
+            n_actions = self.vehicle.n_thrusters if self.options.action == "thrusters" else 6
+            self.action_space = spaces.Dict(
+                {name: spaces.Box(-1.0, 1.0, (n_actions,), np.float32) for name in self.agents}
+            )
         box = lambda n: spaces.Box(-np.inf, np.inf, (n,), np.float32)  # noqa: E731
         self._entry_spaces = {
             "pose": box(6),
@@ -107,6 +142,10 @@ class TeamInspectionEnv(gymnasium.Env):
             "coverage": spaces.Box(0.0, 1.0, (SECTORS + 1,), np.float32),
             "others": box(3 * (n_robots - 1)),
         }
+        if self.tasks_mode:
+            self._entry_spaces["tasks"] = box(4 * len(self.tasks))
+            self._entry_spaces["tasks_done"] = spaces.Box(0.0, 1.0, (len(self.tasks),), np.float32)
+        self.tasks_done = np.zeros(len(self.tasks), bool)
         if self.options.flat_obs:
             size = sum(space.shape[0] for space in self._entry_spaces.values())
             per_robot = box(size)
@@ -121,6 +160,11 @@ class TeamInspectionEnv(gymnasium.Env):
         self._sector_size = np.maximum(np.bincount(self._sector, minlength=SECTORS), 1)
         self.seen = np.zeros(len(self.coverage.voxels), bool)
         self._estimators: dict[str, DeadReckoning] = {}
+        # STABILIZE holds roll and pitch, so the pose controllers of the tasks mode leave them alone
+        self._controllers = {
+            name: PoseController(self.vehicle.controller_model(), hold_roll_pitch=False)
+            for name in self.agents
+        }
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """Start an episode (``seed`` seeds poses and all noise)."""
@@ -148,13 +192,20 @@ class TeamInspectionEnv(gymnasium.Env):
                 self._readings[name], self.scenario.control_period_s
             )
         self.seen = np.zeros(len(self.coverage.voxels), bool)
+        self.tasks_done = np.zeros(len(self.tasks), bool)
+        self._episode_start = self.sim.time
+        for controller in self._controllers.values():
+            controller.reset()  # no integral carried over from the last episode
         self._look()
         return self._observation(), {}
 
     def step(self, action):
-        """Hold each robot's action for one control period; one shared reward."""
+        """Hold each robot's action for one control period (with ``action="tasks"``: fly each robot to
+        its chosen task and hold it for the dwell); one shared reward."""
         if not isinstance(action, dict) or set(action) != set(self.agents):
             raise ValueError(f"action must be a dict with one entry per robot {self.agents}")
+        if self.tasks_mode:
+            return self._fly_tasks(action)
         commands = {}
         for name in self.agents:
             value = np.asarray(action[name], float)
@@ -182,6 +233,59 @@ class TeamInspectionEnv(gymnasium.Env):
         truncated = not terminated and self._steps >= self.max_steps
         info = {"new_voxels": new, "coverage": float(self.seen.mean())}
         return self._observation(), float(reward), terminated, bool(truncated), info
+
+    def _fly_tasks(self, action):
+        chosen = {}
+        for name in self.agents:
+            index = action[name]
+            if not (isinstance(index, int | np.integer) and 0 <= int(index) < len(self.tasks)):
+                raise ValueError(f"{name}: a task index from 0 to {len(self.tasks) - 1}, got {index!r}")
+            chosen[name] = int(index)
+        params = TaskParams(dwell_s=1.0, timeout_s=self.task_timeout_s)
+        executors = {
+            name: TaskExecutor(
+                self._controllers[name],
+                self._estimates[name],
+                self.tasks[k, :3],
+                float(self.tasks[k, 3]),
+                params,
+            )
+            for name, k in chosen.items()
+        }
+        status = dict.fromkeys(self.agents, "approach")
+        period = self.scenario.control_period_s
+        start = self.sim.time
+        collided = False
+        while any(s not in ("capture", "timeout") for s in status.values()):
+            commands = {}
+            for name in self.agents:
+                commands[name], now = executors[name].update(self._estimates[name], period)
+                if status[name] not in ("capture", "timeout"):
+                    status[name] = now
+            self.sim.step(commands)
+            for name in self.agents:
+                self._readings[name] = self.sim.sensors(name)
+                self._estimates[name] = self._estimators[name].update(self._readings[name], period)
+            if self.sim.contacts():
+                collided = True
+                break
+            if self.sim.time - self._episode_start >= self.options.episode_s:
+                break
+        for name, k in chosen.items():
+            if status[name] == "capture":
+                self.tasks_done[k] = True
+        new = self._look()
+        elapsed = self.sim.time - start
+        reward = REWARD_PER_VOXEL * new - 0.01 * elapsed - (10.0 if collided else 0.0)
+        terminated = collided or bool(self.tasks_done.all())
+        truncated = not terminated and self.sim.time - self._episode_start >= self.options.episode_s
+        info = {
+            "new_voxels": new,
+            "coverage": float(self.seen.mean()),
+            "status": status,
+            "elapsed_s": elapsed,
+        }
+        return self._observation(), float(reward), bool(terminated), bool(truncated), info
 
     def _look(self) -> int:
         viewpoints = []
@@ -215,15 +319,44 @@ class TeamInspectionEnv(gymnasium.Env):
                 "coverage": coverage,
                 "others": np.concatenate(others) if others else np.zeros(0),
             }
+            if self.tasks_mode:
+                entry["tasks"] = self.tasks.ravel()
+                entry["tasks_done"] = self.tasks_done.astype(float)
             entry = {key: np.asarray(value, np.float32) for key, value in entry.items()}
             out[name] = (
                 np.concatenate([entry[k] for k in self._entry_spaces]) if self.options.flat_obs else entry
             )
         return out
 
+    def render(self):
+        """``rgb_array``: a view from behind the first robot, every robot's left camera inset."""
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.sim.model, 240, 320)
+        return third_person_frame(self.sim, self._renderer, self.agents)
+
     def close(self) -> None:
-        """Free the simulation's renderer."""
+        """Free the renderers."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
         self.sim.close()
+
+
+def task_poses(tank, camera_position) -> np.ndarray:
+    """The inspection tasks of the ``action="tasks"`` mode, ``(N, 4)`` robot poses x, y, z, yaw: the
+    Voronoi baseline's viewpoints (``maptidal.baselines``, 1 m from the walls), each with the robot
+    placed so that its camera sits at the viewpoint looking along it."""
+    viewpoints = voronoi_viewpoints(tank)
+    poses = []
+    for viewpoint in viewpoints:
+        direction = viewpoint[3:] / np.linalg.norm(viewpoint[3:])
+        yaw = math.atan2(direction[1], direction[0])
+        forward = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+        position = viewpoint[:3] - forward * float(camera_position[0]) - np.array([0, 0, camera_position[2]])
+        poses.append([*position, yaw])
+    return np.array(poses)
 
 
 def parallel_env(**kwargs):

@@ -52,6 +52,20 @@ def bare_rate(env_id: str, steps: int, images: bool = False) -> float:
     return rate
 
 
+def team_rate(steps: int) -> float:
+    env = gymnasium.make("MapTidal/TeamInspection-v0")
+    env.reset(seed=0)
+    action = {name: np.zeros(6, np.float32) for name in env.unwrapped.agents}
+    start = time.perf_counter()
+    for _ in range(steps):
+        *_, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset()
+    rate = steps / (time.perf_counter() - start)
+    env.close()
+    return rate
+
+
 def vector_rate(num_envs: int, steps: int) -> float:
     vec = gymnasium.make_vec("MapTidal/GoToPose-v0", num_envs=num_envs, vectorization_mode="async")
     vec.reset(seed=0)
@@ -70,13 +84,14 @@ def main() -> None:
     args = parser.parse_args()
     print("| environment | images | env steps/s | wrapped work, steps/s | overhead (goal <= 1.3 / 1.1) |")
     print("|---|---|---|---|---|")
-    for env_id in ("MapTidal/GoToPose-v0", "MapTidal/StationKeeping-v0"):
+    steps = max(10, args.steps // 10)
+    for env_id in ("MapTidal/GoToPose-v0", "MapTidal/StationKeeping-v0", "MapTidal/TankInspection-v0"):
         ours, bare = env_rate(env_id, args.steps), bare_rate(env_id, args.steps)
         print(f"| {env_id} | none | {ours:.0f} | {bare:.0f} | {bare / ours:.2f} |")
-    steps = max(10, args.steps // 10)
-    ours = env_rate("MapTidal/GoToPose-v0", steps, obs_images="stereo", image_size=(400, 640))
-    bare = bare_rate("MapTidal/GoToPose-v0", steps, images=True)
-    print(f"| MapTidal/GoToPose-v0 | stereo 640x400 | {ours:.1f} | {bare:.1f} | {bare / ours:.2f} |")
+        ours = env_rate(env_id, steps, obs_images="stereo", image_size=(400, 640))
+        bare = bare_rate(env_id, steps, images=True)
+        print(f"| {env_id} | stereo 640x400 | {ours:.1f} | {bare:.1f} | {bare / ours:.2f} |")
+    print(f"\nMapTidal/TeamInspection-v0, 2 robots: {team_rate(args.steps):.0f} steps/s")
     one, two = vector_rate(1, args.steps), vector_rate(2, args.steps)
     print(f"\nasync vector: 1 env {one:.0f} steps/s, 2 envs {two:.0f} steps/s", end=", ")
     print(f"ratio {two / one:.2f} (goal >= 1.6)")
