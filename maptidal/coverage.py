@@ -14,7 +14,13 @@ Definitions, used everywhere in maptidal:
 - *ideal*: gamma with shape alpha = 4 and scale beta = 2/3 (peak at 2 views,
   paper Sec. IV.C), in integer-centred bins: bin 0 = CDF(0.5), bin k = CDF(k + 0.5)
   - CDF(k - 0.5); it sums to slightly less than 1 (the tail beyond K + 0.5);
-- *MAD*: the mean over bins 0..K of |histogram - ideal|.
+- *MAD*: the mean of |histogram - ideal| over **fixed bins**: 0, 1, .., 10 views and one tail bin for
+  11 or more (12 bins, whatever the data). The ideal is the gamma's bins 0..10 renormalised to sum to 1,
+  and 0 in the tail: more than 10 views is over-coverage, never ideal (the gamma puts 1.1e-4 of its
+  mass there). So every voxel beyond 10 views counts as a full error, and adding over-covered voxels
+  never lowers MAD. The paper (Sec. IV.C, Fig. 8) compares the histogram with the gamma but does not
+  say over which bins; over bins 0..K with K the largest count (``mad_legacy``, our earlier reading),
+  a method that over-covers spreads its error over more bins and scores better the more it over-covers.
 
 The paper's count ignores occlusion: a voxel seen through another wall still
 counts. ``occlusion=True`` counts a voxel only when the straight ray from the
@@ -128,6 +134,27 @@ def views_histogram(views: np.ndarray, last_bin: int) -> np.ndarray:
     return np.bincount(views, minlength=last_bin + 1)[: last_bin + 1] / len(views)
 
 
+MAD_LAST_BIN = 10  # fixed MAD bins: 0..10 views, then one tail bin for 11 or more
+
+
+def fixed_bins(views: np.ndarray) -> np.ndarray:
+    """Fraction of voxels with 0, 1, .., 10 views and with 11 or more: ``(12,)``, sums to 1."""
+    views = np.asarray(views, dtype=np.int64)
+    counts = np.bincount(np.minimum(views, MAD_LAST_BIN + 1), minlength=MAD_LAST_BIN + 2)
+    return counts / max(len(views), 1)
+
+
+def ideal_fixed_bins() -> np.ndarray:
+    """The ideal over the fixed MAD bins: the gamma's bins 0..10 renormalised, and 0 in the tail."""
+    ideal = ideal_gamma_bins(MAD_LAST_BIN)
+    return np.append(ideal / ideal.sum(), 0.0)
+
+
+def mad(views: np.ndarray) -> float:
+    """MAD over the fixed bins (module docstring)."""
+    return mean_absolute_difference(fixed_bins(views), ideal_fixed_bins())
+
+
 def mean_absolute_difference(histogram: np.ndarray, ideal: np.ndarray) -> float:
     """MAD: the mean of |histogram - ideal| over the bins both cover."""
     return float(np.mean(np.abs(np.asarray(histogram) - np.asarray(ideal))))
@@ -146,6 +173,7 @@ class CoverageReport:
     ideal: list[float]
     mad: float
     occlusion: bool
+    mad_legacy: float = 0.0  # over bins 0..K (module docstring): reported beside MAD as a note only
 
     def to_dict(self) -> dict:
         """A JSON-ready dict of every field."""
@@ -169,7 +197,8 @@ def coverage_report(views: np.ndarray, n_viewpoints: int, occlusion: bool = Fals
         max_views=max_views,
         histogram=histogram.tolist(),
         ideal=ideal.tolist(),
-        mad=mean_absolute_difference(histogram, ideal),
+        mad=mad(views),
+        mad_legacy=mean_absolute_difference(histogram, ideal),
         occlusion=occlusion,
     )
 

@@ -85,10 +85,33 @@ def test_report_on_known_counts():
     assert sum(report.histogram) == pytest.approx(1.0)
     ideal = ideal_gamma_bins(12)
     histogram = np.bincount(views, minlength=13) / len(views)
-    assert report.mad == pytest.approx(np.mean(np.abs(histogram - ideal)))
+    assert report.mad_legacy == pytest.approx(np.mean(np.abs(histogram - ideal)))
+    # MAD over the fixed bins 0..10 and a tail bin (11+), the ideal renormalised over 0..10, 0 in the tail
+    fixed = np.r_[np.bincount(views, minlength=13)[:11], (views >= 11).sum()] / len(views)
+    ideal_fixed = np.r_[ideal_gamma_bins(10) / ideal_gamma_bins(10).sum(), 0.0]
+    assert report.mad == pytest.approx(np.mean(np.abs(fixed - ideal_fixed)))
     assert len(coverage_report(np.array([0, 1]), 1).histogram) == 11  # K is at least 10
     with pytest.raises(ValueError, match="no voxels"):
         coverage_report(np.array([], dtype=int), 0)
+
+
+@given(
+    st.lists(st.integers(0, 30), min_size=1, max_size=200),
+    st.lists(st.integers(11, 60), min_size=1, max_size=100),
+)
+def test_adding_over_covered_voxels_never_lowers_mad(views, extra):
+    """Over the fixed bins, voxels seen 11 or more times only add error; over bins 0..K they did not."""
+    before = coverage_report(np.array(views), 1).mad
+    after = coverage_report(np.array(views + extra), 1).mad
+    assert after >= before - 1e-12
+
+
+def test_the_legacy_mad_rewarded_over_coverage_and_the_fixed_bins_do_not():
+    """Half the voxels over-covered: the legacy MAD improves, the fixed-bin MAD does not."""
+    base = np.r_[np.zeros(10, int), np.full(90, 2)]
+    over = np.r_[base, np.arange(11, 61)]  # 50 voxels seen 11 to 60 times each
+    assert coverage_report(over, 1).mad_legacy < coverage_report(base, 1).mad_legacy  # the old flaw
+    assert coverage_report(over, 1).mad >= coverage_report(base, 1).mad
 
 
 def test_mad_is_zero_only_for_the_ideal_itself():

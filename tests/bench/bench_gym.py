@@ -22,6 +22,8 @@ def env_rate(env_id: str, steps: int, **options) -> float:
     env = gymnasium.make(env_id, **options)
     env.reset(seed=0)
     action = np.zeros(env.action_space.shape, np.float32)
+    for _ in range(10):  # warm-up: the first steps pay one-off costs (renderer, caches)
+        env.step(action)
     start = time.perf_counter()
     for _ in range(steps):
         *_, terminated, truncated, _ = env.step(action)
@@ -40,6 +42,10 @@ def bare_rate(env_id: str, steps: int, images: bool = False) -> float:
     inner = env.unwrapped
     sim, robot = inner.sim, inner.robot
     command = {robot: np.zeros(6)}
+    for _ in range(10):
+        sim.step(command)
+        if images:
+            sim.render_stereo(robot)
     start = time.perf_counter()
     for _ in range(steps):
         for _ in range(inner.substeps):
