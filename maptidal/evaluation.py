@@ -30,6 +30,7 @@ from maptidal.camera import StereoCameraParams
 from maptidal.coverage import CoverageModel, CoverageParams, CoverageReport
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
 from maptidal.files import atomic_write_json, atomic_write_text, save_tasks
+from maptidal.free_space import free_space_counts, free_space_mask
 from maptidal.keyframes import (
     ExplorationParams,
     FeatureParams,
@@ -62,6 +63,9 @@ class EvaluationConfig:
     features: FeatureParams | None = None  # None: FeatureParams(seed=seed)
     voronoi: VoronoiParams = field(default_factory=VoronoiParams)
     boustrophedon: BoustrophedonParams = field(default_factory=BoustrophedonParams)
+    # drop each keyframe's new tasks that are not in the water or cannot see their target
+    # (maptidal.free_space); off by default, as the paper has no such check
+    free_space: bool = False
 
 
 @dataclass
@@ -103,11 +107,14 @@ def wall_aligned_fraction(tank: TankModel, keyframes: list[Keyframe], angle_rad:
     return aligned / total if total else 0.0
 
 
-def discover_over_keyframes(keyframes: list[Keyframe], params: DiscoveryParams) -> MapTidalRun:
+def discover_over_keyframes(
+    keyframes: list[Keyframe], params: DiscoveryParams, free_space_tank: TankModel | None = None
+) -> MapTidalRun:
     """Run discovery frame by frame; each frame's existing tasks are all earlier tasks.
 
     A keyframe whose mesh is empty or only degenerate is skipped and logged in its
-    frame record, as a real front end would skip it.
+    frame record, as a real front end would skip it. With ``free_space_tank``, each frame's new tasks
+    that fail :func:`maptidal.free_space.free_space_mask` on that tank are dropped (and counted).
     """
     tasks = np.empty((0, 6))
     frames = []
@@ -121,7 +128,12 @@ def discover_over_keyframes(keyframes: list[Keyframe], params: DiscoveryParams) 
         except DiscoveryInputError as err:
             frames.append({**record, "skipped": str(err)})
             continue
-        tasks = np.vstack([tasks, result.final])
+        new = result.final
+        if free_space_tank is not None and len(new):
+            keep = free_space_mask(free_space_tank, new, params.standoff)
+            record["dropped_by_free_space"] = int((~keep).sum())
+            new = new[keep]
+        tasks = np.vstack([tasks, new])
         frames.append({**record, **result.counts, "mode": result.pruning_mode, "total_tasks": len(tasks)})
     return MapTidalRun(tasks, frames)
 
@@ -133,7 +145,7 @@ def method_viewpoints(
     Map-TIDAL run's per-keyframe record."""
     if keyframes is None:
         keyframes = config_keyframes(tank, config)
-    run = discover_over_keyframes(keyframes, config.discovery)
+    run = discover_over_keyframes(keyframes, config.discovery, tank if config.free_space else None)
     viewpoints = {
         "maptidal": run.tasks,
         "voronoi": voronoi_viewpoints(tank, replace(config.voronoi, seed=config.seed)),
@@ -217,6 +229,14 @@ def run_compare(
             tank, keyframes, config.discovery.theta_ex
         ),
         "reports": {name: report.to_dict() for name, report in reports.items()},
+        # where each method's tasks lie (maptidal.free_space), whether or not the check was on
+        "free_space": {
+            "check": config.free_space,
+            **{
+                name: free_space_counts(tank, rows, config.discovery.standoff)
+                for name, rows in viewpoints.items()
+            },
+        },
     }
     if out_dir is None:
         return document
@@ -261,6 +281,11 @@ def compare_report(document: dict, plots: bool) -> str:
         f"Keyframe faces whose view direction is within theta_ex of a wall or floor normal: "
         f"{100 * document['faces_within_theta_ex_of_a_surface_normal']:.0f}%. Discovery excludes a CIP "
         "only near a task of similar direction, so the other faces tend to add tasks.",
+        "",
+        "Where the Map-TIDAL tasks lie (free space check "
+        f"{'on: the others were dropped' if document['free_space']['check'] else 'off, as the paper'}): "
+        + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in document["free_space"]["maptidal"].items())
+        + ".",
         "",
     ]
     if plots:
@@ -319,6 +344,7 @@ def _worker_setup(config: EvaluationConfig, in_subprocess: bool = False) -> None
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     tank = TankModel(load_tank_config(config.tank_path))
     _WORKER_STATE["config"] = config
+    _WORKER_STATE["tank"] = tank
     _WORKER_STATE["model"] = CoverageModel.from_tank(tank, config.coverage)
     _WORKER_STATE["keyframes"] = config_keyframes(tank, config)
 
@@ -327,7 +353,8 @@ def _evaluate_combination(combination: tuple[float, float, float]) -> dict:
     t, r_ex, theta_ex = combination
     config: EvaluationConfig = _WORKER_STATE["config"]
     params = replace(config.discovery, threshold=t, r_ex=r_ex, theta_ex=theta_ex)
-    run = discover_over_keyframes(_WORKER_STATE["keyframes"], params)
+    tank = _WORKER_STATE["tank"] if config.free_space else None
+    run = discover_over_keyframes(_WORKER_STATE["keyframes"], params, tank)
     report, _ = _WORKER_STATE["model"].evaluate(run.tasks)
     return {"t": t, "r_ex": r_ex, "theta_ex": theta_ex, **summary_row(report)}
 

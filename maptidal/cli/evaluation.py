@@ -45,6 +45,12 @@ def register(commands) -> None:
     )
     add_coverage_args(compare)
     compare.add_argument(
+        "--free-space",
+        action="store_true",
+        help="drop Map-TIDAL tasks outside the water or without a line of sight to their target "
+        "(off by default: the paper has no such check)",
+    )
+    compare.add_argument(
         "--seed", type=int, default=0, help="seed of keyframes and Voronoi (default %(default)s)"
     )
     compare.add_argument("--json", action="store_true", help='print {"methods": {...}} as JSON')
@@ -78,6 +84,12 @@ def register(commands) -> None:
     sweep.add_argument("--seed", type=int, default=0, help="seed of the keyframes (default %(default)s)")
     sweep.add_argument("--no-plots", action="store_true", help="skip the heatmap PNG")
     add_coverage_args(sweep)
+    sweep.add_argument(
+        "--free-space",
+        action="store_true",
+        help="drop Map-TIDAL tasks outside the water or without a line of sight to their target "
+        "(off by default: the paper has no such check)",
+    )
     add_discovery_params(sweep)
     sweep.set_defaults(handler=run_sweep)
 
@@ -122,6 +134,7 @@ def _evaluation_config(args: argparse.Namespace):
         seed=args.seed,
         coverage=coverage_params_from(args, discovery),
         discovery=discovery,
+        free_space=args.free_space,
     )
 
 
