@@ -83,6 +83,17 @@ def register(commands) -> None:
     )
     sweep.add_argument("--seed", type=int, default=0, help="seed of the keyframes (default %(default)s)")
     sweep.add_argument("--no-plots", action="store_true", help="skip the heatmap PNG")
+    sweep.add_argument(
+        "--paper-grid",
+        action="store_true",
+        help="the 24 cells of the paper's Table I, written beside the paper's values with its colour "
+        "classes and the rank correlation of each column (paper_table.md, paper_table.json)",
+    )
+    sweep.add_argument(
+        "--json",
+        action="store_true",
+        help='print the result as JSON ({"cells": [...], "rank_correlation": {...}} with --paper-grid)',
+    )
     add_coverage_args(sweep)
     sweep.add_argument(
         "--free-space",
@@ -158,14 +169,38 @@ def run_compare(args: argparse.Namespace) -> int:
 def run_sweep(args: argparse.Namespace) -> int:
     """Handler of ``maptidal sweep``."""
     from maptidal.evaluation import grid_size, parse_grid, run_sweep, sweep_markdown
+    from maptidal.files import atomic_write_json, atomic_write_text
+    from maptidal.paper_table import PAPER_GRID, rank_correlations, side_by_side, table_markdown, trends
 
-    grid = parse_grid(args.grid or [])
+    if args.paper_grid and args.grid:
+        raise ValueError("--paper-grid is the paper's grid: give it or --grid, not both")
+    grid = dict(PAPER_GRID) if args.paper_grid else parse_grid(args.grid or [])
     jobs = min(args.jobs, grid_size(grid), os.cpu_count() or 1)
     if jobs < args.jobs:
         print(f"maptidal sweep: using {jobs} processes (grid size and CPU count)", file=sys.stderr)
     plots = not args.no_plots
-    rows = run_sweep(args.out, grid, _evaluation_config(args), jobs=jobs, plots=plots)
-    print(sweep_markdown(rows))
+    rows = run_sweep(args.out, grid, _evaluation_config(args), jobs=jobs, plots=plots, progress=not args.json)
     files = ["sweep.csv", "sweep.md"] + (["sweep.png"] if plots else [])
+    if args.paper_grid:
+        cells = side_by_side(rows)
+        document = {
+            "cells": cells,
+            "rank_correlation": rank_correlations(cells),
+            "trends": {"ours": trends(cells, "ours"), "paper": trends(cells, "paper")},
+        }
+        atomic_write_json(Path(args.out) / "paper_table.json", document)
+        atomic_write_text(
+            Path(args.out) / "paper_table.md", table_markdown(cells, document["rank_correlation"])
+        )
+        files += ["paper_table.json", "paper_table.md"]
+        if args.json:
+            print(json.dumps(document))
+            return 0
+        print(table_markdown(cells, document["rank_correlation"]))
+    elif args.json:
+        print(json.dumps({"rows": rows}))
+        return 0
+    else:
+        print(sweep_markdown(rows))
     print(f"files in {args.out}: {', '.join(files)}")
     return 0
