@@ -35,12 +35,16 @@ from maptidal.keyframes import (
     ExplorationParams,
     FeatureParams,
     Keyframe,
+    PaperCaptureParams,
     exploration_keyframes,
+    keyframes_at,
+    paper_capture_poses,
 )
 from maptidal.progress import ProgressBar
 from maptidal.tank import TankModel, load_tank_config
 
 METHODS = ("maptidal", "voronoi", "boustrophedon")
+CAPTURE_PATHS = ("sweep", "paper")
 
 # Paper, Section IV.E: the comparison on the OSB tank.
 PAPER_TABLE = {
@@ -66,6 +70,14 @@ class EvaluationConfig:
     # drop each keyframe's new tasks that are not in the water or cannot see their target
     # (maptidal.free_space); off by default, as the paper has no such check
     free_space: bool = False
+    # "sweep": the two yaw sweeps of ExplorationParams (the default so far); "paper": the paper's
+    # protocol, 7 keyframes rising 0.5 m in front of the end wall (PaperCaptureParams)
+    capture: str = "sweep"
+    paper_capture: PaperCaptureParams = field(default_factory=PaperCaptureParams)
+
+    def __post_init__(self) -> None:
+        if self.capture not in CAPTURE_PATHS:
+            raise ValueError(f"capture must be one of {CAPTURE_PATHS}, got {self.capture!r}")
 
 
 @dataclass
@@ -77,7 +89,10 @@ class MapTidalRun:
 
 
 def config_keyframes(tank: TankModel, config: EvaluationConfig) -> list[Keyframe]:
-    """The exploration keyframes an evaluation config asks for."""
+    """The keyframes an evaluation config asks for: its capture path's poses."""
+    if config.capture == "paper":
+        poses = paper_capture_poses(config.paper_capture)
+        return keyframes_at(tank, poses, features=config.features, camera=config.camera, seed=config.seed)
     return exploration_keyframes(
         tank, config.exploration, features=config.features, camera=config.camera, seed=config.seed
     )

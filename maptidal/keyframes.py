@@ -57,6 +57,39 @@ class ExplorationParams:
     yaw_step_deg: float = 30.0  # consecutive keyframes overlap by 48 of 78.5 deg
 
 
+@dataclass(frozen=True)
+class PaperCaptureParams:
+    """The paper's capture protocol (Sec. IV.B): "the robot was allowed to rise slowly a distance of about
+    0.5 m, and the first 7 keyframes were analyzed", facing the end wall.
+
+    The start pose is not given; our reading of the paper's clues, written down before comparing:
+    1.0 m from the end wall, the range L_i at which the OAK-D was most accurate; on the tank's centre
+    line (Fig. 6B: "the main robot at the center"); rising from 0.75 to 1.25 m, 0.5 m about mid-depth
+    of the 2 m water."""
+
+    distance_from_end_wall_m: float = 1.0
+    start_height_m: float = 0.75
+    rise_m: float = 0.5
+    keyframes: int = 7
+
+
+def paper_capture_poses(params: PaperCaptureParams | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Camera (position, forward) pairs of the paper's protocol: facing the end wall (+x), rising."""
+    params = params or PaperCaptureParams()
+    if params.keyframes < 1:
+        raise ValueError(f"the protocol needs at least one keyframe, got {params.keyframes}")
+    steps = max(params.keyframes - 1, 1)
+    return [
+        (
+            np.array(
+                [-params.distance_from_end_wall_m, 0.0, params.start_height_m + params.rise_m * k / steps]
+            ),
+            np.array([1.0, 0.0, 0.0]),
+        )
+        for k in range(params.keyframes)
+    ]
+
+
 @dataclass
 class Keyframe:
     """One synthetic keyframe: camera pose, keypoints and the Kimera-like mesh."""
@@ -191,6 +224,18 @@ def exploration_keyframes(
     seed: int = 0,
 ) -> list[Keyframe]:
     """The keyframes of an exploration pass over ``tank`` (deterministic for a seed)."""
+    return keyframes_at(tank, exploration_poses(tank, exploration), features, camera, mesher, seed)
+
+
+def keyframes_at(
+    tank: TankModel,
+    poses: list[tuple[np.ndarray, np.ndarray]],
+    features: FeatureParams | None = None,
+    camera: StereoCameraParams | None = None,
+    mesher: MesherParams | None = None,
+    seed: int = 0,
+) -> list[Keyframe]:
+    """Synthetic keyframes at the given camera (position, forward) poses (deterministic for a seed)."""
     features = features or FeatureParams(seed=seed)
     camera = camera or StereoCameraParams()
     rng = np.random.default_rng(seed + 1)
@@ -198,5 +243,5 @@ def exploration_keyframes(
     triangles = tank.scene_triangles()
     return [
         render_keyframe(triangles, landmarks, position, forward, camera, rng, mesher)
-        for position, forward in exploration_poses(tank, exploration)
+        for position, forward in poses
     ]

@@ -86,3 +86,21 @@ def test_sweep_paper_grid_prints_ours_beside_the_papers(tmp_path, capsys):
     assert set(cell["ours"]) == {"avg", "num", "pct", "classes"}
     assert (tmp_path / "paper_table.md").exists() and (tmp_path / "paper_table.json").exists()
     assert main(["sweep", "--paper-grid", "--grid", "t=0.7", "--out", str(tmp_path)]) == 2
+
+
+def test_the_papers_capture_protocol_is_seven_keyframes_rising_half_a_metre():
+    from maptidal.evaluation import EvaluationConfig, config_keyframes
+    from maptidal.keyframes import PaperCaptureParams, paper_capture_poses
+    from maptidal.tank import TankModel
+
+    poses = paper_capture_poses()
+    assert len(poses) == 7
+    heights = [position[2] for position, _ in poses]
+    assert heights[-1] - heights[0] == pytest.approx(0.5) and heights == sorted(heights)
+    assert all(position[0] == -1.0 and position[1] == 0.0 for position, _ in poses)  # 1 m, centre line
+    assert all(forward.tolist() == [1.0, 0.0, 0.0] for _, forward in poses)  # facing the end wall
+    assert len(paper_capture_poses(PaperCaptureParams(keyframes=3))) == 3
+    keyframes = config_keyframes(TankModel(), EvaluationConfig(capture="paper"))
+    assert len(keyframes) == 7 and all(len(k.mesh.faces) > 0 for k in keyframes)
+    with pytest.raises(ValueError, match="capture"):
+        EvaluationConfig(capture="spiral")

@@ -45,6 +45,13 @@ def register(commands) -> None:
     )
     add_coverage_args(compare)
     compare.add_argument(
+        "--capture",
+        choices=("sweep", "paper"),
+        default="sweep",
+        help="keyframes: two yaw sweeps from the centre line (sweep, default), or the paper's protocol, "
+        "7 keyframes rising 0.5 m 1 m in front of the end wall (paper)",
+    )
+    compare.add_argument(
         "--free-space",
         action="store_true",
         help="drop Map-TIDAL tasks outside the water or without a line of sight to their target "
@@ -96,6 +103,13 @@ def register(commands) -> None:
     )
     add_coverage_args(sweep)
     sweep.add_argument(
+        "--capture",
+        choices=("sweep", "paper"),
+        default="sweep",
+        help="keyframes: two yaw sweeps from the centre line (sweep, default), or the paper's protocol, "
+        "7 keyframes rising 0.5 m 1 m in front of the end wall (paper)",
+    )
+    sweep.add_argument(
         "--free-space",
         action="store_true",
         help="drop Map-TIDAL tasks outside the water or without a line of sight to their target "
@@ -146,6 +160,7 @@ def _evaluation_config(args: argparse.Namespace):
         coverage=coverage_params_from(args, discovery),
         discovery=discovery,
         free_space=args.free_space,
+        capture=args.capture,
     )
 
 
