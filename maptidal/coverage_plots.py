@@ -162,3 +162,26 @@ def plot_sweep_heatmaps(rows: list[dict], path: str | os.PathLike) -> None:
             figure.colorbar(image, ax=axes, shrink=0.8)
     figure.tight_layout()
     _save(figure, path)
+
+
+def plot_noise_curve(rows: list[dict], path: str | os.PathLike, title: str = "") -> None:
+    """Task count and the share of keyframe faces within theta_ex of a surface normal against the
+    stereo disparity noise, with and without landmark refinement (two panels)."""
+    figure, (tasks_axes, faces_axes) = plt.subplots(1, 2, figsize=(9, 3.8))
+    for refined, style in ((False, "o-"), (True, "s--")):
+        chosen = [r for r in rows if r["refined"] == refined]
+        levels = [r["disparity_sigma_px"] for r in chosen]
+        label = "refined over tracked frames" if refined else "one triangulation per keyframe"
+        tasks_axes.plot(levels, [r["tasks"] for r in chosen], style, label=label)
+        faces_axes.plot(levels, [100 * r["faces_within_theta_ex"] for r in chosen], style, label=label)
+    tasks_axes.set_xlabel("disparity noise sigma_d (px)")
+    tasks_axes.set_ylabel("Map-TIDAL tasks")
+    faces_axes.set_xlabel("disparity noise sigma_d (px)")
+    faces_axes.set_ylabel("faces within theta_ex of a surface normal (%)")
+    tasks_axes.legend(fontsize=8)
+    tasks_axes.grid(alpha=0.3)
+    faces_axes.grid(alpha=0.3)
+    if title:
+        figure.suptitle(title)
+    figure.tight_layout()
+    _save(figure, path)

@@ -36,7 +36,8 @@ from maptidal.keyframes import (
     FeatureParams,
     Keyframe,
     PaperCaptureParams,
-    exploration_keyframes,
+    RefinementParams,
+    exploration_poses,
     keyframes_at,
     paper_capture_poses,
 )
@@ -74,6 +75,8 @@ class EvaluationConfig:
     # protocol, 7 keyframes rising 0.5 m in front of the end wall (PaperCaptureParams)
     capture: str = "sweep"
     paper_capture: PaperCaptureParams = field(default_factory=PaperCaptureParams)
+    # Kimera-like landmark fusion over the frames they are tracked in (off: one triangulation per keyframe)
+    refinement: RefinementParams = field(default_factory=RefinementParams)
 
     def __post_init__(self) -> None:
         if self.capture not in CAPTURE_PATHS:
@@ -90,12 +93,48 @@ class MapTidalRun:
 
 def config_keyframes(tank: TankModel, config: EvaluationConfig) -> list[Keyframe]:
     """The keyframes an evaluation config asks for: its capture path's poses."""
-    if config.capture == "paper":
-        poses = paper_capture_poses(config.paper_capture)
-        return keyframes_at(tank, poses, features=config.features, camera=config.camera, seed=config.seed)
-    return exploration_keyframes(
-        tank, config.exploration, features=config.features, camera=config.camera, seed=config.seed
+    poses = (
+        paper_capture_poses(config.paper_capture)
+        if config.capture == "paper"
+        else exploration_poses(tank, config.exploration)
     )
+    return keyframes_at(
+        tank,
+        poses,
+        features=config.features,
+        camera=config.camera,
+        seed=config.seed,
+        refinement=config.refinement,
+    )
+
+
+def landmark_noise_curve(config: EvaluationConfig, levels: tuple[float, ...]) -> list[dict]:
+    """Map-TIDAL against the stereo disparity noise (px), with and without landmark refinement: task
+    count, share of keyframe faces within theta_ex of a surface normal, and coverage, per level."""
+    tank = TankModel(load_tank_config(config.tank_path))
+    model = CoverageModel.from_tank(tank, config.coverage)
+    rows = []
+    for level in levels:
+        for refined in (False, True):
+            run_config = replace(
+                config,
+                camera=replace(config.camera, disparity_sigma_px=float(level)),
+                refinement=replace(config.refinement, enabled=refined),
+            )
+            keyframes = config_keyframes(tank, run_config)
+            run = discover_over_keyframes(keyframes, config.discovery)
+            report, _ = model.evaluate(run.tasks)
+            rows.append(
+                {
+                    "disparity_sigma_px": float(level),
+                    "refined": refined,
+                    "faces_within_theta_ex": wall_aligned_fraction(
+                        tank, keyframes, config.discovery.theta_ex
+                    ),
+                    **summary_row(report),
+                }
+            )
+    return rows
 
 
 def wall_aligned_fraction(tank: TankModel, keyframes: list[Keyframe], angle_rad: float) -> float:

@@ -58,6 +58,19 @@ class ExplorationParams:
 
 
 @dataclass(frozen=True)
+class RefinementParams:
+    """Landmark refinement like Kimera's VIO back end (smart factors fuse every observation of a
+    landmark), in its simplest form: each keyframe stands for ``frames_per_keyframe`` camera frames
+    that each observe the landmarks it sees, with independent stereo depth noise; a landmark's position
+    is the inverse-variance weighted mean of all its observations so far, so its error falls as
+    1 / sqrt(observations) while it stays tracked. Off: each keyframe triangulates afresh (one
+    observation per keyframe, the earlier model)."""
+
+    enabled: bool = False
+    frames_per_keyframe: int = 5
+
+
+@dataclass(frozen=True)
 class PaperCaptureParams:
     """The paper's capture protocol (Sec. IV.B): "the robot was allowed to rise slowly a distance of about
     0.5 m, and the first 7 keyframes were analyzed", facing the end wall.
@@ -169,8 +182,14 @@ def render_keyframe(
     camera: StereoCameraParams,
     rng: np.random.Generator,
     mesher: MesherParams | None = None,
+    fusion: dict | None = None,
+    frames: int = 1,
 ) -> Keyframe:
-    """Keypoints and mesh of the landmarks a stereo camera at this pose would track."""
+    """Keypoints and mesh of the landmarks a stereo camera at this pose would track.
+
+    With ``fusion`` (a dict kept across keyframes: landmark id -> (weighted sum, weight)), the
+    keyframe's ``frames`` observations of each landmark are fused with its earlier ones
+    (:class:`RefinementParams`) and the mesh uses the fused positions."""
     position, forward = np.asarray(position, float), np.asarray(forward, float)
     forward = forward / np.linalg.norm(forward)
     right, up = (axis[0] for axis in camera_axes(forward[None, :]))
@@ -189,8 +208,18 @@ def render_keyframe(
     if len(ids) > camera.max_keypoints:
         ids = np.sort(rng.choice(ids, size=camera.max_keypoints, replace=False))
     depth = z[ids]
-    noisy_depth = depth + rng.normal(size=len(ids)) * camera.depth_sigma(depth)
+    sigma = camera.depth_sigma(depth)
+    frames = max(int(frames), 1)
+    # the mean of `frames` independent observations: one draw of sigma / sqrt(frames)
+    noisy_depth = depth + rng.normal(size=len(ids)) * sigma / np.sqrt(frames)
     noisy = position + offsets[ids] * (noisy_depth / depth)[:, None]
+    if fusion is not None:
+        weights = frames / np.maximum(sigma, 1e-9) ** 2
+        for row, (landmark, weight) in enumerate(zip(ids.tolist(), weights, strict=True)):
+            total, mass = fusion.get(landmark, (np.zeros(3), 0.0))
+            total, mass = total + weight * noisy[row], mass + weight
+            fusion[landmark] = (total, mass)
+            noisy[row] = total / mass
     pixels = np.column_stack([u[ids], v[ids]])
     mesh = kimera_mesh(pixels, noisy, (camera.width, camera.height), position, forward, mesher)
     return Keyframe(position, forward, pixels, noisy, ids, mesh)
@@ -222,9 +251,12 @@ def exploration_keyframes(
     camera: StereoCameraParams | None = None,
     mesher: MesherParams | None = None,
     seed: int = 0,
+    refinement: RefinementParams | None = None,
 ) -> list[Keyframe]:
     """The keyframes of an exploration pass over ``tank`` (deterministic for a seed)."""
-    return keyframes_at(tank, exploration_poses(tank, exploration), features, camera, mesher, seed)
+    return keyframes_at(
+        tank, exploration_poses(tank, exploration), features, camera, mesher, seed, refinement
+    )
 
 
 def keyframes_at(
@@ -234,14 +266,18 @@ def keyframes_at(
     camera: StereoCameraParams | None = None,
     mesher: MesherParams | None = None,
     seed: int = 0,
+    refinement: RefinementParams | None = None,
 ) -> list[Keyframe]:
     """Synthetic keyframes at the given camera (position, forward) poses (deterministic for a seed)."""
     features = features or FeatureParams(seed=seed)
     camera = camera or StereoCameraParams()
+    refinement = refinement or RefinementParams()
     rng = np.random.default_rng(seed + 1)
     landmarks = tank_landmarks(tank, features)
     triangles = tank.scene_triangles()
+    fusion: dict | None = {} if refinement.enabled else None
+    frames = refinement.frames_per_keyframe if refinement.enabled else 1
     return [
-        render_keyframe(triangles, landmarks, position, forward, camera, rng, mesher)
+        render_keyframe(triangles, landmarks, position, forward, camera, rng, mesher, fusion, frames)
         for position, forward in poses
     ]
