@@ -1,0 +1,192 @@
+"""The stereo front end's first stages: keypoints on the left image, matches along the rectified row,
+and triangulation (issue [perception]). OpenCV and numpy only; it takes images and intrinsics, never the
+simulator, so it runs unchanged on real OAK-D recordings.
+
+- **Keypoints**: ORB (default), FAST, GFTT (Shi-Tomasi, Kimera's choice) or SIFT, spread over a grid of
+  cells (bucketing: each cell keeps its strongest responses), capped at ``max_keypoints``.
+- **Matching**: the pair is rectified, so a left keypoint's match lies on the same row of the right
+  image, ``disparity`` pixels to the left. For each keypoint a ``patch x patch`` window is compared by
+  the sum of absolute differences (SAD) at every disparity in the range; the best must beat the second
+  best outside its neighbours by the ``ratio``; a left-right check matches the right window back along
+  the row and must land within ``lr_tolerance_px`` of the keypoint; a parabola through the costs at the
+  best disparity and its neighbours gives the sub-pixel disparity.
+- **Triangulation**: ``Z = f_x b / d``, ``X = (u - c_x) Z / f_x``, ``Y = (v - c_y) Z / f_y`` in the left
+  camera's frame (x right, y down, z forward), kept within the depth band (default 0.3 to 4 m).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+DETECTORS = ("orb", "fast", "gftt", "sift")
+
+
+class FrontEndInputError(ValueError):
+    """Images the front end cannot use: the message names the problem (size, type, emptiness)."""
+
+
+@dataclass(frozen=True)
+class StereoParams:
+    """Detector, bucketing, matching and depth-band settings of the stereo front end."""
+
+    detector: str = "orb"
+    max_keypoints: int = 400
+    grid_rows: int = 4
+    grid_cols: int = 6
+    min_disparity_px: int = 1
+    max_disparity_px: int = 96  # 0.31 m at f = 392 px and b = 7.5 cm
+    patch: int = 9
+    ratio: float = 0.85
+    lr_tolerance_px: float = 1.0
+    min_depth_m: float = 0.3
+    max_depth_m: float = 4.0
+
+    def __post_init__(self) -> None:
+        if self.detector not in DETECTORS:
+            raise ValueError(f"detector must be one of {DETECTORS}, got {self.detector!r}")
+        if not (self.patch >= 3 and self.patch % 2 == 1):
+            raise ValueError(f"patch must be an odd size of at least 3 px, got {self.patch}")
+        if not (0 <= self.min_disparity_px < self.max_disparity_px):
+            raise ValueError("need 0 <= min_disparity_px < max_disparity_px")
+        if not (0 < self.ratio <= 1):
+            raise ValueError(f"ratio must be in (0, 1], got {self.ratio}")
+
+
+def _gray(image: np.ndarray, name: str) -> np.ndarray:
+    array = np.asarray(image)
+    if array.ndim == 3 and array.shape[2] == 3:
+        array = cv2.cvtColor(array.astype(np.uint8), cv2.COLOR_RGB2GRAY)
+    if array.ndim != 2 or array.size == 0:
+        raise FrontEndInputError(f"{name} must be an (H, W) or (H, W, 3) image, got shape {array.shape}")
+    if array.dtype != np.uint8:
+        raise FrontEndInputError(f"{name} must be 8-bit, got {array.dtype}")
+    return array
+
+
+def detect_keypoints(image: np.ndarray, params: StereoParams | None = None) -> np.ndarray:
+    """Keypoints ``(N, 2)`` (u, v pixels) on ``image``, bucketed over the grid, strongest first per cell."""
+    params = params or StereoParams()
+    gray = _gray(image, "image")
+    height, width = gray.shape
+    margin = params.patch  # keep the matching windows inside the image
+    if params.detector == "gftt":
+        corners = cv2.goodFeaturesToTrack(gray, params.max_keypoints * 4, 0.01, 5, blockSize=7)
+        points = np.zeros((0, 2)) if corners is None else corners.reshape(-1, 2)
+        responses = -np.arange(len(points), dtype=float)  # returned strongest first
+    else:
+        detector = {
+            "orb": lambda: cv2.ORB_create(
+                nfeatures=params.max_keypoints * 4, edgeThreshold=margin, patchSize=margin
+            ),
+            "fast": lambda: cv2.FastFeatureDetector_create(threshold=10),
+            "sift": lambda: cv2.SIFT_create(nfeatures=params.max_keypoints * 4),
+        }[params.detector]()
+        found = detector.detect(gray, None)
+        points = np.array([k.pt for k in found], float).reshape(-1, 2)
+        responses = np.array([k.response for k in found], float)
+    inside = (
+        (points[:, 0] >= margin)
+        & (points[:, 0] < width - margin)
+        & (points[:, 1] >= margin)
+        & (points[:, 1] < height - margin)
+    )
+    points, responses = points[inside], responses[inside]
+    per_cell = max(1, params.max_keypoints // (params.grid_rows * params.grid_cols))
+    rows = np.minimum((points[:, 1] * params.grid_rows / height).astype(int), params.grid_rows - 1)
+    cols = np.minimum((points[:, 0] * params.grid_cols / width).astype(int), params.grid_cols - 1)
+    kept = []
+    for cell in np.unique(rows * params.grid_cols + cols):
+        members = np.flatnonzero(rows * params.grid_cols + cols == cell)
+        kept.extend(members[np.argsort(-responses[members])][:per_cell].tolist())
+    return points[np.array(sorted(kept), int)] if kept else np.zeros((0, 2))
+
+
+def _sad_row(
+    left: np.ndarray, right: np.ndarray, u: int, v: int, half: int, disparities: np.ndarray
+) -> np.ndarray:
+    window = left[v - half : v + half + 1, u - half : u + half + 1].astype(np.int32)
+    costs = np.full(len(disparities), np.inf)
+    for k, d in enumerate(disparities):
+        x = u - d
+        if x - half < 0:
+            break
+        candidate = right[v - half : v + half + 1, x - half : x + half + 1].astype(np.int32)
+        costs[k] = np.abs(window - candidate).sum()
+    return costs
+
+
+def match_stereo(
+    left: np.ndarray, right: np.ndarray, keypoints: np.ndarray, params: StereoParams | None = None
+) -> np.ndarray:
+    """Sub-pixel disparity (px) of each left keypoint in the right image; NaN where the match is
+    ambiguous (ratio test), inconsistent (left-right check) or off the image."""
+    params = params or StereoParams()
+    left_gray, right_gray = _gray(left, "left image"), _gray(right, "right image")
+    if left_gray.shape != right_gray.shape:
+        raise FrontEndInputError(
+            f"left and right images differ in size: {left_gray.shape} and {right_gray.shape}"
+        )
+    half = params.patch // 2
+    height, width = left_gray.shape
+    disparities = np.arange(params.min_disparity_px, params.max_disparity_px + 1)
+    out = np.full(len(keypoints), np.nan)
+    for index, (u_f, v_f) in enumerate(np.asarray(keypoints, float).reshape(-1, 2)):
+        u, v = round(float(u_f)), round(float(v_f))
+        if not (half <= v < height - half and half <= u < width - half):
+            continue
+        costs = _sad_row(left_gray, right_gray, u, v, half, disparities)
+        best = int(np.argmin(costs))
+        if not np.isfinite(costs[best]):
+            continue
+        others = np.concatenate([costs[: max(best - 1, 0)], costs[best + 2 :]])
+        second = others.min() if len(others) else np.inf
+        if np.isfinite(second) and not costs[best] < params.ratio * second:
+            continue  # ambiguous: not clearly better than the next candidate (ties included)
+        d = int(disparities[best])
+        # left-right check: the right window's best match back along the left row
+        x = u - d
+        back = np.arange(0, params.max_disparity_px + 1)
+        back = back[x + back < width - half]
+        window = right_gray[v - half : v + half + 1, x - half : x + half + 1].astype(np.int32)
+        back_costs = [
+            np.abs(
+                window - left_gray[v - half : v + half + 1, x + b - half : x + b + half + 1].astype(np.int32)
+            ).sum()
+            for b in back
+        ]
+        if abs(int(back[int(np.argmin(back_costs))]) - d) > params.lr_tolerance_px:
+            continue
+        offset = 0.0
+        if 0 < best < len(costs) - 1 and np.isfinite(costs[best - 1]) and np.isfinite(costs[best + 1]):
+            denominator = costs[best - 1] - 2 * costs[best] + costs[best + 1]
+            if denominator > 0:
+                offset = 0.5 * (costs[best - 1] - costs[best + 1]) / denominator
+        out[index] = d + float(np.clip(offset, -0.5, 0.5))
+    return out
+
+
+def triangulate(
+    keypoints: np.ndarray,
+    disparity: np.ndarray,
+    fx: float,
+    fy: float,
+    cx: float,
+    cy: float,
+    baseline_m: float,
+    params: StereoParams | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Camera-frame points ``(M, 3)`` (x right, y down, z forward) of the matched keypoints within the
+    depth band, and the indices of the keypoints they come from."""
+    params = params or StereoParams()
+    keypoints = np.asarray(keypoints, float).reshape(-1, 2)
+    disparity = np.asarray(disparity, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth = fx * baseline_m / disparity
+    keep = np.flatnonzero(np.isfinite(depth) & (depth >= params.min_depth_m) & (depth <= params.max_depth_m))
+    z = depth[keep]
+    x = (keypoints[keep, 0] - cx) * z / fx
+    y = (keypoints[keep, 1] - cy) * z / fy
+    return np.column_stack([x, y, z]), keep

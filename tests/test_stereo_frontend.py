@@ -1,0 +1,101 @@
+"""The stereo front end's first stages (maptidal/perception/stereo.py): keypoints, row matching,
+triangulation, on rendered frames and on images with a known disparity."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from maptidal.perception.stereo import (
+    FrontEndInputError,
+    StereoParams,
+    detect_keypoints,
+    match_stereo,
+    triangulate,
+)
+
+
+def _texture(seed: int = 0, shape=(200, 320)) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    noise = rng.uniform(0, 255, (shape[0] // 4, shape[1] // 4)).astype(np.float32)
+    return (
+        cv2.resize(noise, (shape[1], shape[0]), interpolation=cv2.INTER_CUBIC).clip(0, 255).astype(np.uint8)
+    )
+
+
+def test_a_known_sub_pixel_disparity_is_recovered():
+    left = _texture()
+    disparity = 12.3
+    shift = np.float32([[1, 0, -disparity], [0, 1, 0]])  # right image: content moved left by d
+    right = cv2.warpAffine(left, shift, (left.shape[1], left.shape[0]), flags=cv2.INTER_CUBIC)
+    params = StereoParams(detector="gftt", max_disparity_px=40)
+    keypoints = detect_keypoints(left, params)
+    keypoints = keypoints[keypoints[:, 0] > 60]  # their matches lie inside the right image
+    found = match_stereo(left, right, keypoints, params)
+    assert np.isfinite(found).mean() > 0.8
+    assert np.nanmedian(np.abs(found - disparity)) < 0.15
+
+
+def test_textureless_images_give_no_matches():
+    flat = np.full((200, 320), 128, np.uint8)
+    keypoints = np.array([[160.0, 100.0], [200.0, 120.0]])
+    assert np.all(np.isnan(match_stereo(flat, flat, keypoints)))  # every disparity ties: ambiguous
+
+
+def test_keypoints_are_spread_over_the_grid_and_capped():
+    image = _texture(1, (400, 640))
+    for detector in ("orb", "fast", "gftt", "sift"):
+        params = StereoParams(detector=detector, max_keypoints=240)
+        points = detect_keypoints(image, params)
+        assert 0 < len(points) <= 240, detector
+        cells = {(int(v * 4 / 400), int(u * 6 / 640)) for u, v in points}
+        assert len(cells) >= 20, detector  # of the 24 cells
+
+
+def test_triangulation_follows_the_pinhole_and_the_depth_band():
+    keypoints = np.array([[320.0, 200.0], [420.0, 150.0], [100.0, 100.0]])
+    disparity = np.array([29.4, 14.7, 2.0])  # Z = 392 x 0.075 / d: 1.0 m, 2.0 m, 14.7 m
+    points, kept = triangulate(keypoints, disparity, 392.0, 392.0, 320.0, 200.0, 0.075)
+    assert kept.tolist() == [0, 1]  # 14.7 m is outside the 0.3 to 4 m band
+    np.testing.assert_allclose(points[0], [0.0, 0.0, 1.0])
+    np.testing.assert_allclose(points[1], [100 * 2.0 / 392, -50 * 2.0 / 392, 2.0])
+
+
+@pytest.mark.parametrize("detector", ["orb", "gftt", "fast", "sift"])
+def test_depth_on_rendered_frames_matches_the_renderers(detector):
+    from envs.simulation import Simulation
+
+    sim = Simulation()
+    sim.reset(seed=0)
+    K = np.array(sim.intrinsics()["K"])
+    left, right, depth, _ = sim.render_stereo("rov0", depth=True)
+    params = StereoParams(detector=detector)
+    keypoints = detect_keypoints(left, params)
+    points, kept = triangulate(
+        keypoints,
+        match_stereo(left, right, keypoints, params),
+        K[0, 0],
+        K[1, 1],
+        K[0, 2],
+        K[1, 2],
+        sim.intrinsics()["baseline_m"],
+        params,
+    )
+    truth = depth[keypoints[kept, 1].round().astype(int), keypoints[kept, 0].round().astype(int)]
+    relative = np.abs(points[:, 2] - truth) / truth
+    assert len(kept) >= 80
+    assert np.median(relative) < 0.02
+
+
+def test_bad_images_get_a_clear_error():
+    image = _texture()
+    with pytest.raises(FrontEndInputError, match="differ in size"):
+        match_stereo(image, image[:100], np.array([[50.0, 50.0]]))
+    with pytest.raises(FrontEndInputError, match="8-bit"):
+        detect_keypoints(image.astype(np.float32))
+    with pytest.raises(FrontEndInputError, match="image"):
+        detect_keypoints(np.zeros((0, 0), np.uint8))
+    with pytest.raises(ValueError, match="detector"):
+        StereoParams(detector="surf")
+    assert len(detect_keypoints(np.zeros((100, 100), np.uint8))) == 0  # a black frame: no keypoints
