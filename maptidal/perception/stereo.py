@@ -6,10 +6,11 @@ simulator, so it runs unchanged on real OAK-D recordings.
   cells (bucketing: each cell keeps its strongest responses), capped at ``max_keypoints``.
 - **Matching**: the pair is rectified, so a left keypoint's match lies on the same row of the right
   image, ``disparity`` pixels to the left. For each keypoint a ``patch x patch`` window is compared by
-  the sum of absolute differences (SAD) at every disparity in the range; the best must beat the second
-  best outside its neighbours by the ``ratio``; a left-right check matches the right window back along
-  the row and must land within ``lr_tolerance_px`` of the keypoint; a parabola through the costs at the
-  best disparity and its neighbours gives the sub-pixel disparity.
+  the sum of squared differences (``cv2.matchTemplate``, TM_SQDIFF) at every disparity in the range;
+  the best must beat the second best outside its neighbours by the ``ratio``; a left-right check
+  matches the right window back along the row and must land within ``lr_tolerance_px`` of the
+  keypoint; a parabola through the costs at the best disparity and its neighbours gives the sub-pixel
+  disparity.
 - **Triangulation**: ``Z = f_x b / d``, ``X = (u - c_x) Z / f_x``, ``Y = (v - c_y) Z / f_y`` in the left
   camera's frame (x right, y down, z forward), kept within the depth band (default 0.3 to 4 m).
 """
@@ -104,18 +105,9 @@ def detect_keypoints(image: np.ndarray, params: StereoParams | None = None) -> n
     return points[np.array(sorted(kept), int)] if kept else np.zeros((0, 2))
 
 
-def _sad_row(
-    left: np.ndarray, right: np.ndarray, u: int, v: int, half: int, disparities: np.ndarray
-) -> np.ndarray:
-    window = left[v - half : v + half + 1, u - half : u + half + 1].astype(np.int32)
-    costs = np.full(len(disparities), np.inf)
-    for k, d in enumerate(disparities):
-        x = u - d
-        if x - half < 0:
-            break
-        candidate = right[v - half : v + half + 1, x - half : x + half + 1].astype(np.int32)
-        costs[k] = np.abs(window - candidate).sum()
-    return costs
+def _costs_along(template: np.ndarray, strip: np.ndarray) -> np.ndarray:
+    """Sum of squared differences of ``template`` at every column offset of ``strip`` (same height)."""
+    return cv2.matchTemplate(strip, template, cv2.TM_SQDIFF)[0]
 
 
 def match_stereo(
@@ -131,36 +123,36 @@ def match_stereo(
         )
     half = params.patch // 2
     height, width = left_gray.shape
-    disparities = np.arange(params.min_disparity_px, params.max_disparity_px + 1)
+    left_f, right_f = left_gray.astype(np.float32), right_gray.astype(np.float32)
     out = np.full(len(keypoints), np.nan)
     for index, (u_f, v_f) in enumerate(np.asarray(keypoints, float).reshape(-1, 2)):
         u, v = round(float(u_f)), round(float(v_f))
         if not (half <= v < height - half and half <= u < width - half):
             continue
-        costs = _sad_row(left_gray, right_gray, u, v, half, disparities)
-        best = int(np.argmin(costs))
-        if not np.isfinite(costs[best]):
+        rows = slice(v - half, v + half + 1)
+        template = left_f[rows, u - half : u + half + 1]
+        # candidate right positions x = u - d for d = min .. max (as far as the image goes)
+        x_low = max(half, u - params.max_disparity_px)
+        x_high = u - params.min_disparity_px
+        if x_high < x_low:
             continue
+        costs = _costs_along(template, right_f[rows, x_low - half : x_high + half + 1])[::-1]  # d increasing
+        disparities = np.arange(params.min_disparity_px, params.min_disparity_px + len(costs))
+        best = int(np.argmin(costs))
         others = np.concatenate([costs[: max(best - 1, 0)], costs[best + 2 :]])
-        second = others.min() if len(others) else np.inf
-        if np.isfinite(second) and not costs[best] < params.ratio * second:
+        if len(others) and not costs[best] < params.ratio * others.min():
             continue  # ambiguous: not clearly better than the next candidate (ties included)
         d = int(disparities[best])
         # left-right check: the right window's best match back along the left row
         x = u - d
-        back = np.arange(0, params.max_disparity_px + 1)
-        back = back[x + back < width - half]
-        window = right_gray[v - half : v + half + 1, x - half : x + half + 1].astype(np.int32)
-        back_costs = [
-            np.abs(
-                window - left_gray[v - half : v + half + 1, x + b - half : x + b + half + 1].astype(np.int32)
-            ).sum()
-            for b in back
-        ]
-        if abs(int(back[int(np.argmin(back_costs))]) - d) > params.lr_tolerance_px:
+        back_high = min(width - 1 - half, x + params.max_disparity_px)
+        back_costs = _costs_along(
+            right_f[rows, x - half : x + half + 1], left_f[rows, x - half : back_high + half + 1]
+        )
+        if abs(int(np.argmin(back_costs)) - d) > params.lr_tolerance_px:
             continue
         offset = 0.0
-        if 0 < best < len(costs) - 1 and np.isfinite(costs[best - 1]) and np.isfinite(costs[best + 1]):
+        if 0 < best < len(costs) - 1:
             denominator = costs[best - 1] - 2 * costs[best] + costs[best + 1]
             if denominator > 0:
                 offset = 0.5 * (costs[best - 1] - costs[best + 1]) / denominator
