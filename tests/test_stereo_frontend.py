@@ -99,3 +99,29 @@ def test_bad_images_get_a_clear_error():
     with pytest.raises(ValueError, match="detector"):
         StereoParams(detector="surf")
     assert len(detect_keypoints(np.zeros((100, 100), np.uint8))) == 0  # a black frame: no keypoints
+
+
+# ----- tracking ---------------------------------------------------------------------------------------
+def test_klt_tracks_a_known_shift_and_keeps_the_landmark_ids():
+    from maptidal.perception.tracking import LandmarkTracker, track_points
+
+    first = _texture(2, (400, 640))
+    shift = np.float32([[1, 0, 6.0], [0, 1, -3.0]])  # the scene moves 6 px right and 3 px up
+    second = cv2.warpAffine(first, shift, (640, 400), flags=cv2.INTER_CUBIC)
+    points = detect_keypoints(first, StereoParams(detector="gftt"))
+    moved, ok = track_points(first, second, points)
+    assert ok.mean() > 0.8  # those near the edge that fills with black are lost
+    np.testing.assert_allclose(np.median(moved[ok] - points[ok], axis=0), [6.0, -3.0], atol=0.1)
+    tracker = LandmarkTracker()
+    ids_1, pixels_1, tracked_1 = tracker.update(first)
+    assert len(ids_1) > 100 and not tracked_1.any()  # all new in the first frame
+    ids_2, pixels_2, tracked_2 = tracker.update(second)
+    kept = np.isin(ids_1, ids_2[tracked_2])
+    assert kept.mean() > 0.8  # most landmarks keep their id
+    index = {landmark: k for k, landmark in enumerate(ids_2)}
+    for landmark, pixel in zip(ids_1[kept][:20], pixels_1[kept][:20], strict=True):
+        np.testing.assert_allclose(pixels_2[index[landmark]] - pixel, [6.0, -3.0], atol=0.3)
+    assert len(set(ids_2.tolist())) == len(ids_2)  # new keypoints get new ids
+    blank = np.zeros_like(first)
+    ids_3, _, tracked_3 = tracker.update(blank)  # the view is lost: nothing tracks, nothing new
+    assert not tracked_3.any() and len(ids_3) == 0

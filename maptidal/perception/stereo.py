@@ -56,7 +56,8 @@ class StereoParams:
             raise ValueError(f"ratio must be in (0, 1], got {self.ratio}")
 
 
-def _gray(image: np.ndarray, name: str) -> np.ndarray:
+def gray_image(image: np.ndarray, name: str) -> np.ndarray:
+    """``image`` as 8-bit grey, or :class:`FrontEndInputError` naming ``name`` and the problem."""
     array = np.asarray(image)
     if array.ndim == 3 and array.shape[2] == 3:
         array = cv2.cvtColor(array.astype(np.uint8), cv2.COLOR_RGB2GRAY)
@@ -70,7 +71,7 @@ def _gray(image: np.ndarray, name: str) -> np.ndarray:
 def detect_keypoints(image: np.ndarray, params: StereoParams | None = None) -> np.ndarray:
     """Keypoints ``(N, 2)`` (u, v pixels) on ``image``, bucketed over the grid, strongest first per cell."""
     params = params or StereoParams()
-    gray = _gray(image, "image")
+    gray = gray_image(image, "image")
     height, width = gray.shape
     margin = params.patch  # keep the matching windows inside the image
     if params.detector == "gftt":
@@ -116,7 +117,7 @@ def match_stereo(
     """Sub-pixel disparity (px) of each left keypoint in the right image; NaN where the match is
     ambiguous (ratio test), inconsistent (left-right check) or off the image."""
     params = params or StereoParams()
-    left_gray, right_gray = _gray(left, "left image"), _gray(right, "right image")
+    left_gray, right_gray = gray_image(left, "left image"), gray_image(right, "right image")
     if left_gray.shape != right_gray.shape:
         raise FrontEndInputError(
             f"left and right images differ in size: {left_gray.shape} and {right_gray.shape}"
