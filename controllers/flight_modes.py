@@ -34,7 +34,6 @@ thrusters. Set it False for ArduSub's literal path.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -42,7 +41,6 @@ import numpy as np
 
 from controllers.estimation import StateEstimate, wrap_angle
 from controllers.pid import PID, PIDGains
-from controllers.pose import VehicleModel
 from controllers.position_control import HorizontalPositionControl, PosControlGains, VerticalPositionControl
 
 FLIGHT_MODES = ("manual", "stabilize", "alt_hold", "poshold")
@@ -71,16 +69,14 @@ class ModeParams:
 class FlightController:
     """One robot's flight mode: ``update(pilot, estimate, dt)`` returns the mixer's input (6,)."""
 
-    def __init__(
-        self, mode: str, model: VehicleModel, surface_z_m: float, params: ModeParams | None = None
-    ) -> None:
+    def __init__(self, mode: str, surface_z_m: float, params: ModeParams | None = None) -> None:
         if mode not in FLIGHT_MODES:
             raise ValueError(f"unknown flight mode {mode!r}; choose one of {', '.join(FLIGHT_MODES)}")
-        # every loop here takes the plant as linear in the command, as ArduSub's do; the thrust curve is
-        # either left to soften them (ArduSub's literal path) or linearised per thruster after the mixer
-        # (ModeParams.linearise_thrust, applied by whoever drives the thrusters: linearise_thrusters)
-        model = dataclasses.replace(model, thrust_curve=None)
-        self.mode, self.model, self.surface_z_m = mode, model, surface_z_m
+        # every loop here is ArduSub's, with ArduSub's gains, and takes the plant as linear in the command;
+        # the thrust curve is either left to soften them (ArduSub's literal path) or linearised per
+        # thruster after the mixer (ModeParams.linearise_thrust, applied by whoever drives the thrusters:
+        # controllers.thrusters.linearise_thrusters), so no vehicle model is needed here
+        self.mode, self.surface_z_m = mode, surface_z_m
         self.params = params or ModeParams()
         self.rate = [PID(ATC_RATE_ROLL_PITCH), PID(ATC_RATE_ROLL_PITCH), PID(ATC_RATE_YAW)]
         self.depth_control = VerticalPositionControl(self.params.position)

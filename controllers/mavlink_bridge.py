@@ -55,6 +55,7 @@ from controllers.mavlink_wire import (
     flu_from_frd,
     rpy_from_ned,
     world_from_ned,
+    world_velocity_from_ned,
 )
 
 log = logging.getLogger(__name__)
@@ -128,8 +129,7 @@ class VehicleTelemetry:
         elif self.depth_m is not None:  # the pressure sensor's depth, when no position estimate comes
             position[2] = surface_z_m - self.depth_m
         if self.velocity_ned is not None:
-            world = np.array([self.velocity_ned[0], -self.velocity_ned[1], -self.velocity_ned[2]])
-            velocity_body = rotation_from_rpy(*rpy).T @ world
+            velocity_body = rotation_from_rpy(*rpy).T @ world_velocity_from_ned(self.velocity_ned)
         return StateEstimate(
             position=position,
             rpy=rpy,

@@ -71,22 +71,12 @@ class VehicleModel:
             return np.where(c >= 0, c * self.max_forward_n, c * self.max_reverse_n)
         return self.thrust_curve.thrust_from_command(c, self.pwm_range)
 
-    @functools.cached_property
+    @property
     def authority_table(self) -> np.ndarray:
         """``(2, 6, 101)``: the body force or torque magnitude that a pure pilot command of 0, 0.01 .. 1
         on each axis gives, for +command (row 0) and -command (row 1), through the mixer, the thrust
-        curve and the thruster layout (worked out once per model; monotone in the command)."""
-        matrix = allocation_matrix(self.thruster_positions, self.thruster_directions)
-        params = MixerParams(self.ardusub_frame)
-        table = np.zeros((2, 6, len(_COMMAND_GRID)))
-        for row, sign in enumerate((1.0, -1.0)):
-            for axis in range(6):
-                for j, level in enumerate(_COMMAND_GRID):
-                    command = np.zeros(6)
-                    command[axis] = sign * level
-                    body = matrix @ self.thruster_forces(mix(command, params))
-                    table[row, axis, j] = abs(body[axis])  # pilot order is body order: x, y, z, r, p, y
-        return np.maximum.accumulate(table, axis=2)
+        curve and the thruster layout (worked out once per distinct model; monotone in the command)."""
+        return _authority_table(self)
 
     @property
     def authority(self) -> tuple[np.ndarray, np.ndarray]:
@@ -99,17 +89,51 @@ class VehicleModel:
         curve is inverted (its deadband and bend), so the feedback loops see a linear plant, as
         thrust-linearising autopilots do. Clipped to [-1, 1]."""
         pilot = np.asarray(wrench, float) * PILOT_SIGN
-        table = self.authority_table
+        inverse = _inverse_tables(self)
         out = np.zeros(6)
         for axis in range(6):
-            row = table[0 if pilot[axis] >= 0 else 1, axis]
-            if row[-1] <= 0:
+            if pilot[axis] == 0:
                 continue
-            # keep the last point of every flat run: the inverse then jumps the deadband at once
-            keep = np.append(np.diff(row) > 0, True)
-            level = float(np.interp(min(abs(pilot[axis]), row[-1]), row[keep], _COMMAND_GRID[keep]))
-            out[axis] = np.copysign(level, pilot[axis]) if pilot[axis] != 0 else 0.0
+            forces, levels = inverse[0 if pilot[axis] > 0 else 1][axis]
+            if forces[-1] <= 0:
+                continue
+            level = float(np.interp(min(abs(pilot[axis]), forces[-1]), forces, levels))
+            out[axis] = np.copysign(level, pilot[axis])
         return np.clip(out, -1.0, 1.0)
+
+
+@functools.lru_cache(maxsize=64)
+def _authority_table(model: VehicleModel) -> np.ndarray:
+    # equal models (every controller of one vehicle) share one table: it costs 1,212 mixer calls
+    matrix = allocation_matrix(model.thruster_positions, model.thruster_directions)
+    params = MixerParams(model.ardusub_frame)
+    table = np.zeros((2, 6, len(_COMMAND_GRID)))
+    for row, sign in enumerate((1.0, -1.0)):
+        for axis in range(6):
+            for j, level in enumerate(_COMMAND_GRID):
+                command = np.zeros(6)
+                command[axis] = sign * level
+                body = matrix @ model.thruster_forces(mix(command, params))
+                table[row, axis, j] = abs(body[axis])  # pilot order is body order: x, y, z, r, p, y
+    table = np.maximum.accumulate(table, axis=2)
+    table.setflags(write=False)
+    return table
+
+
+@functools.lru_cache(maxsize=64)
+def _inverse_tables(model: VehicleModel) -> tuple[tuple[tuple[np.ndarray, np.ndarray], ...], ...]:
+    # per sign and axis, (force, command) points for np.interp, keeping the last point of every flat run
+    # so that the inverse jumps the deadband at once
+    table = _authority_table(model)
+    out = []
+    for row in range(2):
+        axes = []
+        for axis in range(6):
+            forces = table[row, axis]
+            keep = np.append(np.diff(forces) > 0, True)
+            axes.append((forces[keep], _COMMAND_GRID[keep]))
+        out.append(tuple(axes))
+    return tuple(out)
 
 
 def pole_placement_gains(
@@ -125,15 +149,6 @@ def pole_placement_gains(
     return PIDGains(
         kp=kp, ki=kp * bandwidth / 8.0, kd=kd, output_limit=authority, integral_limit=0.5 * authority
     )
-
-
-def wrench_to_command(wrench: np.ndarray, authority: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """A body wrench [F; M] as the normalised pilot command, clipped to [-1, 1], for a plant taken as
-    linear in the command (full authority at +-1), as ArduSub's own loops take it."""
-    pilot = np.asarray(wrench, float) * PILOT_SIGN
-    positive, negative = authority
-    scale = np.where(pilot >= 0, positive, negative)
-    return np.clip(np.divide(pilot, scale, out=np.zeros(6), where=scale > 0), -1.0, 1.0)
 
 
 class PoseController:

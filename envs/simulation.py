@@ -224,7 +224,7 @@ class Simulation:
         params = EstimatorParams(surface, DEPTH_SENSOR_POSITION, spec.vehicle.sensors.dvl_position)
         self._autopilots[robot] = _Autopilot(
             DeadReckoning(params, truth["position"], truth["rpy"][2]),
-            FlightController(mode, spec.vehicle.controller_model(), surface, self.mode_params),
+            FlightController(mode, surface, self.mode_params),
         )
 
     def flight_mode(self, robot: str) -> str:

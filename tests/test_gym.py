@@ -257,14 +257,9 @@ def test_the_team_shares_one_reward_for_what_any_robot_sees():
 
 
 def _viewpoint(inner, name):
-    import mujoco
+    from envs.gym.tank_inspection import camera_viewpoint
 
-    truth = inner.sim.ground_truth(name)
-    matrix = np.zeros(9)
-    mujoco.mju_quat2Mat(matrix, np.asarray(truth["quaternion"], float))
-    rotation = matrix.reshape(3, 3)
-    camera = np.asarray(truth["position"]) + rotation @ np.asarray(inner.vehicle.sensors.camera_position)
-    return np.r_[camera, rotation[:, 0]]
+    return camera_viewpoint(inner.sim.ground_truth(name), inner.vehicle.sensors.camera_position)
 
 
 def test_the_team_renders_with_every_robots_camera_inset():

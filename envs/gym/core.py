@@ -64,6 +64,16 @@ class EnvOptions:
         if self.frame not in ("heavy", "standard"):
             raise ValueError(f"frame must be 'heavy' or 'standard', got {self.frame!r}")
 
+    @classmethod
+    def checked(cls, options: dict, also: tuple[str, ...] = ()) -> EnvOptions:
+        """The options from keyword arguments, or a ValueError naming the unknown ones (``also``: the
+        caller's own arguments, listed in the message)."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise ValueError(f"unknown option(s) {unknown}; the options are {sorted(known | set(also))}")
+        return cls(**options)
+
 
 def third_person_frame(sim: Simulation, renderer: mujoco.Renderer, robots: list[str]) -> np.ndarray:
     """A view from behind and above the first robot, with each robot's left camera image inset along
@@ -108,11 +118,7 @@ class MapTidalEnv(gymnasium.Env):
         render_mode: str | None = None,
         **options,
     ) -> None:
-        known = {f.name for f in dataclasses.fields(EnvOptions)}
-        unknown = sorted(set(options) - known)
-        if unknown:
-            raise ValueError(f"unknown option(s) {unknown}; the options are {sorted(known)}")
-        self.options = EnvOptions(**options)
+        self.options = EnvOptions.checked(options)
         if render_mode not in (None, *self.metadata["render_modes"]):
             hint = "" if _has_display() else " ('human' needs a display)"
             raise ValueError(
@@ -294,3 +300,25 @@ class MapTidalEnv(gymnasium.Env):
             self._viewer.close()
             self._viewer = None
         self.sim.close()
+
+
+POSITION_TOLERANCE_M = 0.1  # the task executor's defaults (controllers/task.py)
+YAW_TOLERANCE_RAD = math.radians(5.0)
+
+
+class PoseTargetEnv(MapTidalEnv):
+    """A task with a pose to reach or hold (``self.target``, ``self.target_yaw``, set by
+    ``_start_episode``): the observation adds ``target``, as the robot estimates it."""
+
+    def _task_spaces(self) -> dict[str, spaces.Space]:
+        return {"target": spaces.Box(-np.inf, np.inf, (4,), np.float32)}
+
+    def _task_observation(self) -> dict[str, np.ndarray]:
+        return {"target": self._relative_target(self.target, self.target_yaw)}
+
+    def _target_errors(self, truth: dict) -> tuple[float, float, bool]:
+        """The true distance (m) and yaw error (rad) to the target, and whether both are within the
+        tolerances (0.1 m, 5 deg)."""
+        distance = float(np.linalg.norm(np.asarray(truth["position"]) - self.target))
+        yaw_error = abs(wrap_angle(self.target_yaw - truth["rpy"][2]))
+        return distance, yaw_error, distance <= POSITION_TOLERANCE_M and yaw_error <= YAW_TOLERANCE_RAD

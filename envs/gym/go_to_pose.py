@@ -5,16 +5,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from gymnasium import spaces
 
-from controllers.estimation import wrap_angle
-from envs.gym.core import SAFE_BOX, MapTidalEnv
-
-POSITION_TOLERANCE_M = 0.1  # the task executor's defaults (controllers/task.py)
-YAW_TOLERANCE_RAD = math.radians(5.0)
+from envs.gym.core import SAFE_BOX, PoseTargetEnv
 
 
-class GoToPoseEnv(MapTidalEnv):
+class GoToPoseEnv(PoseTargetEnv):
     """One BlueROV2 in the OSB tank reaches a random inspection pose (position and yaw) and holds it.
 
     ## Action space
@@ -78,12 +73,6 @@ class GoToPoseEnv(MapTidalEnv):
     - v0: first version (maptidal 0.1).
     """
 
-    def _task_spaces(self) -> dict[str, spaces.Space]:
-        return {"target": spaces.Box(-np.inf, np.inf, (4,), np.float32)}
-
-    def _task_observation(self) -> dict[str, np.ndarray]:
-        return {"target": self._relative_target(self.target, self.target_yaw)}
-
     def _start_episode(self) -> None:
         start, yaw = self._sample_pose()
         self.sim.place(self.robot, start, yaw)
@@ -98,17 +87,12 @@ class GoToPoseEnv(MapTidalEnv):
             target = np.clip(start + offset, low, high)
         self.target = target
         self.target_yaw = float(self.np_random.uniform(-math.pi, math.pi))
-        self._previous = self._errors(self.sim.ground_truth(self.robot))
-
-    def _errors(self, truth: dict) -> tuple[float, float]:
-        distance = float(np.linalg.norm(np.asarray(truth["position"]) - self.target))
-        return distance, abs(wrap_angle(self.target_yaw - truth["rpy"][2]))
+        self._previous = self._target_errors(self.sim.ground_truth(self.robot))[:2]
 
     def _reward(self, truth: dict) -> tuple[float, bool, dict]:
-        distance, yaw_error = self._errors(truth)
+        distance, yaw_error, within = self._target_errors(truth)
         reward = 10.0 * (self._previous[0] - distance) + 2.0 * (self._previous[1] - yaw_error)
         reward -= 0.05 * self._energy
-        within = distance <= POSITION_TOLERANCE_M and yaw_error <= YAW_TOLERANCE_RAD
         reward += 1.0 if within else 0.0
         self._previous = (distance, yaw_error)
         terminated = False

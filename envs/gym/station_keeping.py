@@ -5,16 +5,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from gymnasium import spaces
 
-from controllers.estimation import wrap_angle
-from envs.gym.core import MapTidalEnv
-
-POSITION_TOLERANCE_M = 0.1
-YAW_TOLERANCE_RAD = math.radians(5.0)
+from envs.gym.core import PoseTargetEnv
 
 
-class StationKeepingEnv(MapTidalEnv):
+class StationKeepingEnv(PoseTargetEnv):
     """One BlueROV2 holds the pose it starts at while a current and turbulence push it off.
 
     ## Action space
@@ -62,12 +57,6 @@ class StationKeepingEnv(MapTidalEnv):
         self.max_current_m_s, self.turbulence_m_s = max_current_m_s, turbulence_m_s
         super().__init__(*args, **kwargs)
 
-    def _task_spaces(self) -> dict[str, spaces.Space]:
-        return {"target": spaces.Box(-np.inf, np.inf, (4,), np.float32)}
-
-    def _task_observation(self) -> dict[str, np.ndarray]:
-        return {"target": self._relative_target(self.target, self.target_yaw)}
-
     def _start_episode(self) -> None:
         start, yaw = self._sample_pose()
         self.sim.place(self.robot, start, yaw)
@@ -88,9 +77,7 @@ class StationKeepingEnv(MapTidalEnv):
         self.sim.set_current(self.mean_current + self.gust)
 
     def _reward(self, truth: dict) -> tuple[float, bool, dict]:
-        distance = float(np.linalg.norm(np.asarray(truth["position"]) - self.target))
-        yaw_error = abs(wrap_angle(self.target_yaw - truth["rpy"][2]))
-        within = distance <= POSITION_TOLERANCE_M and yaw_error <= YAW_TOLERANCE_RAD
+        distance, yaw_error, within = self._target_errors(truth)
         reward = -distance - 0.5 * yaw_error - 0.05 * self._energy + (1.0 if within else 0.0)
         terminated = bool(self.sim.contacts() or self._out_of_bounds(truth))
         if terminated:

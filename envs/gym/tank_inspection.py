@@ -15,6 +15,46 @@ SECTORS = 8  # coverage summary: the evaluated walls in eight sectors around the
 REWARD_PER_VOXEL = 0.01
 
 
+def camera_viewpoint(truth: dict, camera_position) -> np.ndarray:
+    """The viewpoint row (camera position, viewing direction) of a robot from its true pose
+    (:meth:`envs.simulation.Simulation.ground_truth`) and its camera's body position."""
+    matrix = np.zeros(9)
+    mujoco.mju_quat2Mat(matrix, np.asarray(truth["quaternion"], float))
+    rotation = matrix.reshape(3, 3)
+    return np.r_[
+        np.asarray(truth["position"]) + rotation @ np.asarray(camera_position, float), rotation[:, 0]
+    ]
+
+
+class WallCoverage:
+    """The tank's evaluated walls as voxels (:class:`maptidal.coverage.CoverageModel`, with occlusion),
+    which of them cameras have seen so far, and a summary: the share seen, overall and in
+    :data:`SECTORS` sectors by bearing from (-1.5, 0), a point on the tank's centre line."""
+
+    def __init__(self, tank, voxel_m: float = 0.05) -> None:
+        self.model = CoverageModel.from_tank(tank, CoverageParams(voxel_m=voxel_m, occlusion=True))
+        bearings = np.arctan2(*(self.model.voxels[:, :2] - np.array([-1.5, 0.0])).T[::-1])
+        edges = np.linspace(bearings.min(), bearings.max() + 1e-9, SECTORS + 1)
+        self._sector = np.clip(np.searchsorted(edges, bearings, side="right") - 1, 0, SECTORS - 1)
+        self._sector_size = np.maximum(np.bincount(self._sector, minlength=SECTORS), 1)
+        self.seen = np.zeros(len(self.model.voxels), bool)
+
+    def reset(self) -> None:
+        """Nothing seen."""
+        self.seen[:] = False
+
+    def look(self, viewpoints: np.ndarray) -> int:
+        """Count what the viewpoints ``(N, 6)`` see; the number of voxels newly seen."""
+        new = (self.model.views(viewpoints) > 0) & ~self.seen
+        self.seen |= new
+        return int(new.sum())
+
+    def summary(self) -> np.ndarray:
+        """``(1 + SECTORS,)``: the share seen overall, then per sector."""
+        per_sector = np.bincount(self._sector[self.seen], minlength=SECTORS) / self._sector_size
+        return np.r_[self.seen.mean(), per_sector]
+
+
 class TankInspectionEnv(MapTidalEnv):
     """One BlueROV2 looks at as much of the tank's evaluated walls as it can.
 
@@ -62,45 +102,31 @@ class TankInspectionEnv(MapTidalEnv):
 
     def __init__(self, *args, voxel_m: float = 0.05, episode_s: float = 60.0, **kwargs) -> None:
         super().__init__(*args, episode_s=episode_s, **kwargs)
-        self.coverage = CoverageModel.from_tank(
-            self.scenario.tank, CoverageParams(voxel_m=voxel_m, occlusion=True)
-        )
-        centre = np.array([-1.5, 0.0])
-        bearings = np.arctan2(*(self.coverage.voxels[:, :2] - centre).T[::-1])
-        edges = np.linspace(bearings.min(), bearings.max() + 1e-9, SECTORS + 1)
-        self._sector = np.clip(np.searchsorted(edges, bearings, side="right") - 1, 0, SECTORS - 1)
-        self._sector_size = np.maximum(np.bincount(self._sector, minlength=SECTORS), 1)
-        self.seen = np.zeros(len(self.coverage.voxels), bool)
+        self.walls = WallCoverage(self.scenario.tank, voxel_m)
+        self.coverage = self.walls.model
+
+    @property
+    def seen(self) -> np.ndarray:
+        """Which wall voxels the camera has seen this episode."""
+        return self.walls.seen
 
     def _task_spaces(self) -> dict[str, spaces.Space]:
         return {"coverage": spaces.Box(0.0, 1.0, (SECTORS + 1,), np.float32)}
 
     def _task_observation(self) -> dict[str, np.ndarray]:
-        if not hasattr(self, "seen"):
+        if not hasattr(self, "walls"):  # the base class builds a first observation before __init__ ends
             return {"coverage": np.zeros(SECTORS + 1)}
-        per_sector = np.bincount(self._sector[self.seen], minlength=SECTORS) / self._sector_size
-        return {"coverage": np.r_[self.seen.mean(), per_sector]}
-
-    def viewpoint(self, truth: dict) -> np.ndarray:
-        """The true camera viewpoint row (position, viewing direction) of the robot."""
-        matrix = np.zeros(9)
-        mujoco.mju_quat2Mat(matrix, np.asarray(truth["quaternion"], float))
-        rotation = matrix.reshape(3, 3)
-        camera = np.asarray(truth["position"]) + rotation @ np.asarray(self.vehicle.sensors.camera_position)
-        return np.r_[camera, rotation[:, 0]]
+        return {"coverage": self.walls.summary()}
 
     def _look(self, truth: dict) -> int:
-        views = self.coverage.views(self.viewpoint(truth)[None, :])
-        new = (views > 0) & ~self.seen
-        self.seen |= new
-        return int(new.sum())
+        return self.walls.look(camera_viewpoint(truth, self.vehicle.sensors.camera_position)[None, :])
 
     def _start_episode(self) -> None:
         low, high = SAFE_BOX
         start = self.np_random.uniform(low, high)
         yaw = float(self.np_random.uniform(-math.pi / 3, math.pi / 3))
         self.sim.place(self.robot, start, yaw)
-        self.seen = np.zeros(len(self.coverage.voxels), bool)
+        self.walls.reset()
         self._look(self.sim.ground_truth(self.robot))
 
     def _reward(self, truth: dict) -> tuple[float, bool, dict]:

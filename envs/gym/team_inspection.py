@@ -15,12 +15,11 @@ from controllers.estimation import DeadReckoning, EstimatorParams
 from controllers.pose import PoseController
 from controllers.task import TaskExecutor, TaskParams
 from envs.gym.core import SAFE_BOX, EnvOptions, third_person_frame
-from envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS
+from envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
 from envs.scenario import Scenario, load_scenario, with_frame
 from envs.simulation import Simulation
 from envs.world import DEPTH_SENSOR_POSITION
 from maptidal.baselines import voronoi_viewpoints
-from maptidal.coverage import CoverageModel, CoverageParams
 
 MAX_ROBOTS = 4
 MIN_SEPARATION_M = 0.9  # start poses at least this far apart (a Heavy is 0.58 m wide)
@@ -102,11 +101,9 @@ class TeamInspectionEnv(gymnasium.Env):
         self.task_timeout_s = float(task_timeout_s)
         if not (isinstance(n_robots, int) and 1 <= n_robots <= MAX_ROBOTS):
             raise ValueError(f"n_robots must be an integer from 1 to {MAX_ROBOTS}, got {n_robots!r}")
-        known = {f.name for f in dataclasses.fields(EnvOptions)}
-        unknown = sorted(set(options) - known)
-        if unknown:
-            raise ValueError(f"unknown option(s) {unknown}; the options are {sorted(known | {'n_robots'})}")
-        self.options = EnvOptions(episode_s=episode_s, **options)
+        self.options = EnvOptions.checked(
+            {**options, "episode_s": episode_s}, also=("n_robots", "task_timeout_s")
+        )
         if self.options.obs_images is not None:
             raise ValueError("the team environment has no image observations yet")
         base = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
@@ -152,13 +149,8 @@ class TeamInspectionEnv(gymnasium.Env):
         else:
             per_robot = spaces.Dict(self._entry_spaces)
         self.observation_space = spaces.Dict({name: per_robot for name in self.agents})
-        self.coverage = CoverageModel.from_tank(self.scenario.tank, CoverageParams(occlusion=True))
-        centre = np.array([-1.5, 0.0])
-        bearings = np.arctan2(*(self.coverage.voxels[:, :2] - centre).T[::-1])
-        edges = np.linspace(bearings.min(), bearings.max() + 1e-9, SECTORS + 1)
-        self._sector = np.clip(np.searchsorted(edges, bearings, side="right") - 1, 0, SECTORS - 1)
-        self._sector_size = np.maximum(np.bincount(self._sector, minlength=SECTORS), 1)
-        self.seen = np.zeros(len(self.coverage.voxels), bool)
+        self.walls = WallCoverage(self.scenario.tank)
+        self.coverage = self.walls.model
         self._estimators: dict[str, DeadReckoning] = {}
         # STABILIZE holds roll and pitch, so the pose controllers of the tasks mode leave them alone
         self._controllers = {
@@ -191,7 +183,7 @@ class TeamInspectionEnv(gymnasium.Env):
             self._estimates[name] = self._estimators[name].update(
                 self._readings[name], self.scenario.control_period_s
             )
-        self.seen = np.zeros(len(self.coverage.voxels), bool)
+        self.walls.reset()
         self.tasks_done = np.zeros(len(self.tasks), bool)
         self._episode_start = self.sim.time
         for controller in self._controllers.values():
@@ -287,25 +279,18 @@ class TeamInspectionEnv(gymnasium.Env):
         }
         return self._observation(), float(reward), bool(terminated), bool(truncated), info
 
+    @property
+    def seen(self) -> np.ndarray:
+        """Which wall voxels any robot's camera has seen this episode."""
+        return self.walls.seen
+
     def _look(self) -> int:
-        viewpoints = []
-        for name in self.agents:
-            truth = self.sim.ground_truth(name)
-            matrix = np.zeros(9)
-            mujoco.mju_quat2Mat(matrix, np.asarray(truth["quaternion"], float))
-            rotation = matrix.reshape(3, 3)
-            camera = np.asarray(truth["position"]) + rotation @ np.asarray(
-                self.vehicle.sensors.camera_position
-            )
-            viewpoints.append(np.r_[camera, rotation[:, 0]])
-        views = self.coverage.views(np.array(viewpoints))
-        new = (views > 0) & ~self.seen
-        self.seen |= new
-        return int(new.sum())
+        camera = self.vehicle.sensors.camera_position
+        viewpoints = [camera_viewpoint(self.sim.ground_truth(name), camera) for name in self.agents]
+        return self.walls.look(np.array(viewpoints))
 
     def _observation(self) -> dict:
-        per_sector = np.bincount(self._sector[self.seen], minlength=SECTORS) / self._sector_size
-        coverage = np.r_[self.seen.mean(), per_sector]
+        coverage = self.walls.summary()
         positions = {name: np.asarray(self.sim.ground_truth(name)["position"]) for name in self.agents}
         out = {}
         for name in self.agents:
