@@ -36,7 +36,7 @@ import mujoco
 import numpy as np
 
 from controllers.convention import pilot_command
-from controllers.estimation import DeadReckoning, EstimatorParams
+from controllers.estimation import DeadReckoning, EstimatorParams, StateEstimate
 from controllers.flight_modes import FLIGHT_MODES, FlightController, ModeParams
 from controllers.mixing import MixerParams, mix
 from controllers.thrusters import linearise_thrusters
@@ -136,6 +136,11 @@ class Simulation:
         self._flight_modes = dict.fromkeys(self.robots, flight_mode)
         self._autopilots: dict[str, _Autopilot] = {}
         self._thruster_outputs: dict[str, np.ndarray] = {}
+        # one dead-reckoning estimator per robot that flies a flight mode or was asked to track one;
+        # updated once per control period, after the physics, from the period's one sensor reading
+        self._tracked: set[str] = set()
+        self._estimators: dict[str, DeadReckoning] = {}
+        self._readings: dict[str, dict] = {}
         self.reset()
 
     def close(self) -> None:
@@ -210,22 +215,60 @@ class Simulation:
         self._check(robot)
         if mode not in FLIGHT_MODES:
             raise ValueError(f"unknown flight mode {mode!r}; choose one of {', '.join(FLIGHT_MODES)}")
+        spec = self._specs[robot]
+        if mode != "manual":
+            needed = {"imu", "compass", "depth"} | ({"dvl"} if mode == "poshold" else set())
+            missing = needed - set(spec.sensors)
+            if missing:
+                raise ValueError(
+                    f"{robot}: flight mode {mode} needs the sensors {', '.join(sorted(missing))}"
+                )
         self._flight_modes[robot] = mode
         self._autopilots.pop(robot, None)
-        if mode == "manual":
+        if mode != "manual":
+            self._autopilots[robot] = _Autopilot(
+                FlightController(mode, self.scenario.tank.height, self.mode_params)
+            )
+        self._restart_estimator(robot)
+
+    def track_estimate(self, robot: str) -> None:
+        """Keep a dead-reckoning estimate of ``robot`` (:meth:`estimate`) in every flight mode, MANUAL
+        included, through resets and placements. Robots in the other modes always have one."""
+        self._tracked.add(self._check(robot))
+        self._restart_estimator(robot)
+
+    def _restart_estimator(self, robot: str) -> None:
+        # an estimator starts at the true pose, as a vehicle's does when it is armed at a known spot
+        self._estimators.pop(robot, None)
+        self._readings.pop(robot, None)
+        if robot not in self._autopilots and robot not in self._tracked:
             return
         spec = self._specs[robot]
-        needed = {"imu", "compass", "depth"} | ({"dvl"} if mode == "poshold" else set())
-        missing = needed - set(spec.sensors)
-        if missing:
-            raise ValueError(f"{robot}: flight mode {mode} needs the sensors {', '.join(sorted(missing))}")
         truth = self.ground_truth(robot)
-        surface = self.scenario.tank.height
-        params = EstimatorParams(surface, DEPTH_SENSOR_POSITION, spec.vehicle.sensors.dvl_position)
-        self._autopilots[robot] = _Autopilot(
-            DeadReckoning(params, truth["position"], truth["rpy"][2]),
-            FlightController(mode, surface, self.mode_params),
+        params = EstimatorParams(
+            self.scenario.tank.height, DEPTH_SENSOR_POSITION, spec.vehicle.sensors.dvl_position
         )
+        self._estimators[robot] = DeadReckoning(params, truth["position"], truth["rpy"][2])
+        self._update_estimate(robot)
+
+    def _update_estimate(self, robot: str) -> None:
+        self._readings[robot] = self.sensors(robot)
+        period = self.scenario.substeps * self.scenario.timestep_s
+        self._estimators[robot].update(self._readings[robot], period)
+
+    def estimate(self, robot: str) -> StateEstimate:
+        """``robot``'s dead-reckoned state from its own sensors, as of the end of the last control period
+        (:class:`controllers.estimation.DeadReckoning`): what its flight mode flies on. Robots in MANUAL
+        have one after :meth:`track_estimate`."""
+        if self._check(robot) not in self._estimators:
+            raise ValueError(f"{robot} keeps no estimate in MANUAL: call track_estimate({robot!r}) first")
+        return self._estimators[robot].state
+
+    def latest_readings(self, robot: str) -> dict:
+        """The sensor readings :meth:`estimate` last folded in (as :meth:`sensors` returns them)."""
+        if self._check(robot) not in self._readings:
+            raise ValueError(f"{robot} keeps no estimate in MANUAL: call track_estimate({robot!r}) first")
+        return self._readings[robot]
 
     def flight_mode(self, robot: str) -> str:
         """The robot's flight mode."""
@@ -277,8 +320,8 @@ class Simulation:
                 continue
             self._drive(robot, self.thruster_commands(robot, command, mode))
         for robot, autopilot in self._autopilots.items():
-            # the flight mode runs every control period, on this period's sensor readings
-            estimate = autopilot.estimator.update(self.sensors(robot), period)
+            # the flight mode runs every control period, on the estimate from this moment's readings
+            estimate = self._estimators[robot].state
             mixer_input = autopilot.controller.update(autopilot.pilot, estimate, period)
             thrusters = mix(mixer_input, self._mixers[robot])
             if self.mode_params.linearise_thrust:
@@ -286,6 +329,8 @@ class Simulation:
                 thrusters = linearise_thrusters(thrusters, thruster.curve, thruster.pwm_range)
             self._drive(robot, thrusters)
         self.advance_physics(self.scenario.substeps)
+        for robot in self._estimators:
+            self._update_estimate(robot)
         return self.time
 
     def set_thrusters(self, robot: str, commands) -> None:
@@ -476,9 +521,9 @@ class Simulation:
 
 @dataclass
 class _Autopilot:
-    """A robot's flight-mode state: its estimator, its flight controller and the pilot's last command."""
+    """A robot's flight-mode state: its flight controller and the pilot's last command (the estimate it
+    flies on is the simulation's, :meth:`Simulation.estimate`)."""
 
-    estimator: DeadReckoning
     controller: FlightController
     pilot: np.ndarray = field(default_factory=lambda: np.zeros(6))
 

@@ -29,6 +29,7 @@ viewpoint reaches it unblocked by the scene; the paper does not do this.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import asdict, dataclass
 
@@ -38,7 +39,7 @@ from scipy.stats import gamma
 
 from maptidal.camera import OAKD_HFOV_DEG, OAKD_VFOV_DEG
 from maptidal.geometry import CameraModel, frustum_masks
-from maptidal.raycast import visible_from
+from maptidal.raycast import Occluders, visible_from
 from maptidal.tank import TankModel
 
 # Paper Sec. IV.C: peak at 2 views with alpha = 4 gives beta = 2 / (alpha - 1) = 2/3.
@@ -96,12 +97,12 @@ def views_per_point(
     viewpoints: np.ndarray,
     points: np.ndarray,
     camera: CameraModel,
-    occluders: np.ndarray | None = None,
+    occluders: np.ndarray | Occluders | None = None,
     tolerance: float = 0.0,
 ) -> np.ndarray:
     """For each point, the number of viewpoints whose frustum contains it.
 
-    With ``occluders`` (triangles ``(T, 3, 3)``), a point counts for a viewpoint
+    With ``occluders`` (triangles ``(T, 3, 3)``, or :class:`maptidal.raycast.Occluders`), a point counts for a viewpoint
     only when the ray to it is not blocked more than ``tolerance`` m before it.
     """
     viewpoints = np.asarray(viewpoints, float).reshape(-1, 6)
@@ -109,6 +110,8 @@ def views_per_point(
     counts = np.zeros(len(points), dtype=np.int64)
     if len(viewpoints) == 0 or len(points) == 0:
         return counts
+    if occluders is not None and not isinstance(occluders, Occluders):
+        occluders = Occluders.of(occluders)  # prepared once for every viewpoint
     for viewpoint, inside in zip(viewpoints, frustum_masks(viewpoints, points, camera), strict=True):
         if occluders is not None and inside.any():
             seen = np.flatnonzero(inside)
@@ -222,11 +225,20 @@ class CoverageModel:
         occluders = tank.scene_triangles() if params.occlusion else None
         return cls(voxel_centres(tank.evaluated_surface(), params.voxel_m), params, occluders)
 
-    def views(self, viewpoints: np.ndarray) -> np.ndarray:
-        """Views per voxel for viewpoint rows ``(N, 6)``."""
+    @functools.cached_property
+    def _prepared_occluders(self) -> Occluders | None:
+        return None if self.occluders is None else Occluders.of(self.occluders)
+
+    def views(self, viewpoints: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
+        """Views per voxel for viewpoint rows ``(N, 6)``.
+
+        With ``among`` (voxel indices), only those voxels are counted, and the result has one entry per
+        index: an incremental count that casts no rays to voxels already settled.
+        """
         # A voxel centre lies up to half a diagonal off its surface; allow that much.
         tolerance = float(np.sqrt(3.0) * self.params.voxel_m)
-        return views_per_point(viewpoints, self.voxels, self.params.camera, self.occluders, tolerance)
+        points = self.voxels if among is None else self.voxels[among]
+        return views_per_point(viewpoints, points, self.params.camera, self._prepared_occluders, tolerance)
 
     def evaluate(self, viewpoints: np.ndarray) -> tuple[CoverageReport, np.ndarray]:
         """The report and the views per voxel for viewpoint rows ``(N, 6)``."""

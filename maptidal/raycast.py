@@ -7,6 +7,8 @@ needs no optional dependency (trimesh's fast path wants embree).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 # Rays x triangles pairs per chunk: large enough to amortise numpy's overhead, small
@@ -53,8 +55,83 @@ def first_hit_distances(
     return hits
 
 
+@dataclass(frozen=True)
+class Occluders:
+    """A triangle soup prepared for rays from one origin at a time (:meth:`first_hits_from`).
+
+    With a common origin o, Moller-Trumbore's per-pair cross products become per-triangle vectors that
+    are linear in o: with ``n = e2 x e1``, det = d . n, u = d . (e2 x o - e2 x v0) / det,
+    v = d . (o x e1 - v0 x e1) / det and t = (-o . n - e2 . (v0 x e1)) / det. The parts without o are
+    computed once here, so a cast costs one ``(N, 3) @ (3, 3T)`` product.
+    """
+
+    triangles: np.ndarray
+    v0: np.ndarray
+    edge1: np.ndarray
+    edge2: np.ndarray
+    normal: np.ndarray  # e2 x e1
+    e2_x_v0: np.ndarray
+    v0_x_e1: np.ndarray
+    t_offset: np.ndarray  # e2 . (v0 x e1)
+
+    @classmethod
+    def of(cls, triangles: np.ndarray) -> Occluders:
+        """Prepare ``(T, 3, 3)`` triangles."""
+        triangles = np.asarray(triangles, float).reshape(-1, 3, 3)
+        v0 = triangles[:, 0]
+        edge1, edge2 = triangles[:, 1] - v0, triangles[:, 2] - v0
+        v0_x_e1 = np.cross(v0, edge1)
+        return cls(
+            triangles,
+            v0,
+            edge1,
+            edge2,
+            np.cross(edge2, edge1),
+            np.cross(edge2, v0),
+            v0_x_e1,
+            np.einsum("tk,tk->t", edge2, v0_x_e1),
+        )
+
+    def first_hits_from(
+        self, origin: np.ndarray, directions: np.ndarray, epsilon: float = 1e-9
+    ) -> np.ndarray:
+        """:func:`first_hit_distances` for rays from one ``origin`` ``(3,)``."""
+        directions = np.asarray(directions, float).reshape(-1, 3)
+        hits = np.full(len(directions), np.inf)
+        if len(directions) == 0 or len(self.triangles) == 0:
+            return hits
+        o = np.asarray(origin, float).reshape(3)
+        # a x o for rows a is a @ skew: the cross products with the origin as one 3 x 3 product each
+        skew = np.array([[0.0, -o[2], o[1]], [o[2], 0.0, -o[0]], [-o[1], o[0], 0.0]])
+        u_basis = self.edge2 @ skew - self.e2_x_v0
+        v_basis = -(self.edge1 @ skew) - self.v0_x_e1
+        t_numerator = -(self.normal @ o) - self.t_offset
+        basis = np.concatenate([self.normal, u_basis, v_basis]).T
+        n_triangles = len(self.triangles)
+        step = max(1, _CHUNK_PAIRS // n_triangles)
+        for start in range(0, len(directions), step):
+            products = directions[start : start + step] @ basis
+            det = products[:, :n_triangles]
+            parallel = np.abs(det) < epsilon
+            inv = 1.0 / np.where(parallel, 1.0, det)
+            u = products[:, n_triangles : 2 * n_triangles] * inv
+            v = products[:, 2 * n_triangles :] * inv
+            t = t_numerator[None, :] * inv
+            valid = ~parallel & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > epsilon)
+            hits[start : start + step] = np.where(valid, t, np.inf).min(axis=1)
+        return hits
+
+
+def first_hit_distances_from(
+    origin: np.ndarray, directions: np.ndarray, triangles: np.ndarray | Occluders, epsilon: float = 1e-9
+) -> np.ndarray:
+    """:func:`first_hit_distances` for rays that share one ``origin`` ``(3,)`` (:class:`Occluders`)."""
+    occluders = triangles if isinstance(triangles, Occluders) else Occluders.of(triangles)
+    return occluders.first_hits_from(origin, directions, epsilon)
+
+
 def visible_from(
-    viewpoint: np.ndarray, points: np.ndarray, triangles: np.ndarray, tolerance: float
+    viewpoint: np.ndarray, points: np.ndarray, triangles: np.ndarray | Occluders, tolerance: float
 ) -> np.ndarray:
     """Mask of the ``points`` that a ray from ``viewpoint`` reaches unblocked.
 
@@ -66,7 +143,5 @@ def visible_from(
     offsets = points - np.asarray(viewpoint, float)[:3]
     distances = np.linalg.norm(offsets, axis=1)
     safe = np.where(distances > 0.0, distances, 1.0)
-    hits = first_hit_distances(
-        np.broadcast_to(viewpoint[:3], points.shape), offsets / safe[:, None], triangles
-    )
+    hits = first_hit_distances_from(np.asarray(viewpoint, float)[:3], offsets / safe[:, None], triangles)
     return hits >= distances - tolerance

@@ -20,7 +20,7 @@ from maptidal.coverage import (
     voxel_centres,
 )
 from maptidal.geometry import CameraModel, in_frustum
-from maptidal.raycast import first_hit_distances, visible_from
+from maptidal.raycast import first_hit_distances, first_hit_distances_from, visible_from
 from maptidal.tank import TankModel
 
 CAMERA = CameraModel(72.0, 57.0, 2.0)
@@ -167,6 +167,20 @@ def test_first_hit_distance_agrees_with_brute_force(seed):
     ours = first_hit_distances(origins, directions, mesh.triangles)
     for ray in range(len(origins)):
         expected = _brute_force_first_hit(origins[ray], directions[ray], mesh.triangles)
+        assert ours[ray] == pytest.approx(expected, abs=1e-7)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 10_000))
+def test_shared_origin_first_hit_agrees_with_brute_force(seed):
+    """The one-origin path (used for every occlusion test) against plane-then-barycentric, per ray."""
+    rng = np.random.default_rng(seed)
+    mesh = trimesh.creation.icosphere(subdivisions=1, radius=1.0)
+    origin = rng.uniform(-3, 3, size=3) * rng.choice([0.1, 1.0])  # inside the sphere, or outside
+    directions = rng.normal(size=(40, 3)) * rng.uniform(0.2, 3.0, size=(40, 1))  # not unit
+    ours = first_hit_distances_from(origin, directions, mesh.triangles)
+    for ray in range(len(directions)):
+        expected = _brute_force_first_hit(origin, directions[ray], mesh.triangles)
         assert ours[ray] == pytest.approx(expected, abs=1e-7)
 
 

@@ -13,6 +13,7 @@ from dm_env import test_utils
 from gymnasium.utils.env_checker import check_env
 
 import envs  # noqa: F401  (registers the MapTidal/ environments)
+from envs.gym.tank_inspection import camera_viewpoint
 
 ENV_IDS = ("MapTidal/GoToPose-v0", "MapTidal/StationKeeping-v0", "MapTidal/TankInspection-v0")
 
@@ -145,6 +146,28 @@ def test_inspection_pays_for_new_views_and_nothing_for_looking_again():
         env.close()
 
 
+def test_the_incremental_count_sees_what_the_whole_trajectory_sees():
+    """The reward counts rays only to voxels not yet seen; the set seen must equal a full count of every
+    viewpoint flown (CoverageModel.views over all voxels, the coverage evaluation's own path)."""
+    env = gymnasium.make("MapTidal/TankInspection-v0")
+    try:
+        env.reset(seed=4)
+        inner = env.unwrapped
+        camera = inner.vehicle.sensors.camera_position
+        viewpoints = [camera_viewpoint(inner.sim.ground_truth(inner.robot), camera)]
+        rng = np.random.default_rng(4)
+        for _ in range(25):
+            action = np.r_[rng.uniform(-0.5, 0.5, 2), 0.0, 0.0, 0.0, rng.uniform(-1, 1)].astype(np.float32)
+            *_, terminated, truncated, _ = env.step(action)
+            viewpoints.append(camera_viewpoint(inner.sim.ground_truth(inner.robot), camera))
+            assert not (terminated or truncated)
+        full = inner.coverage.views(np.array(viewpoints)) > 0
+        assert full.sum() > 200
+        np.testing.assert_array_equal(inner.seen, full)
+    finally:
+        env.close()
+
+
 def test_rgb_array_rendering_shows_the_robot_with_its_camera_inset():
     env = gymnasium.make("MapTidal/GoToPose-v0", render_mode="rgb_array")
     try:
@@ -155,6 +178,75 @@ def test_rgb_array_rendering_shows_the_robot_with_its_camera_inset():
     assert frame.shape == (240, 320, 3) and frame.dtype == np.uint8
     inset, rest = frame[4:84, 216:316], frame[120:, :200]
     assert inset.std() > 1 and rest.std() > 1 and not np.allclose(inset.mean(), rest.mean(), atol=0.5)
+
+
+class _FakeViewer:
+    """Stands in for mujoco.viewer's passive handle where no display exists: records what it is given."""
+
+    launched: list = []  # noqa: RUF012
+
+    def __init__(self, model, data):
+        self.model, self.data, self.synced_times, self.closed = model, data, [], False
+        _FakeViewer.launched.append(self)
+
+    def sync(self):
+        self.synced_times.append(float(self.data.time))
+
+    def close(self):
+        self.closed = True
+
+
+def test_human_rendering_drives_mujocos_passive_viewer(monkeypatch):
+    import mujoco.viewer
+
+    import envs.gym.core as core
+
+    monkeypatch.setattr(core, "_has_display", lambda: True)
+    monkeypatch.setattr(
+        core.MapTidalEnv, "metadata", {"render_modes": ["rgb_array", "human"], "render_fps": 10}
+    )
+    monkeypatch.setattr(mujoco.viewer, "launch_passive", _FakeViewer)
+    _FakeViewer.launched.clear()
+    env = gymnasium.make("MapTidal/GoToPose-v0", render_mode="human")
+    env.reset(seed=0)
+    assert env.render() is None
+    env.step(np.zeros(6, np.float32))
+    env.render()
+    sim = env.unwrapped.sim
+    env.close()
+    (viewer,) = _FakeViewer.launched  # one window for the episode, synced after each render
+    assert viewer.model is sim.model and viewer.data is sim.data
+    assert len(viewer.synced_times) == 2 and viewer.synced_times[1] > viewer.synced_times[0]
+    assert viewer.closed
+
+
+def test_human_rendering_without_a_display_says_so(monkeypatch):
+    import envs.gym.core as core
+    from envs.gym.go_to_pose import GoToPoseEnv
+
+    monkeypatch.setattr(core, "_has_display", lambda: False)
+    # (gymnasium.make would instead wrap rgb_array in its own pygame window, HumanRendering)
+    with pytest.raises(ValueError, match="needs a display"):
+        GoToPoseEnv(render_mode="human")
+
+
+def test_dm_viewer_is_handed_a_working_environment_factory(monkeypatch):
+    from dm_control import viewer
+
+    import envs.gym.core as core
+    from envs.gym.dm_tasks import view
+
+    handed = {}
+    monkeypatch.setattr(core, "_has_display", lambda: True)
+    monkeypatch.setattr(viewer, "launch", lambda factory, policy=None: handed.update(factory=factory))
+    view("go_to_pose", seed=3)
+    env = handed["factory"]()  # the viewer builds the environment itself, as dm_control's launch does
+    first = env.reset()
+    step = env.step(np.zeros(6))
+    assert first.first() and step.mid() and set(step.observation) >= {"pose", "target"}
+    monkeypatch.setattr(core, "_has_display", lambda: False)
+    with pytest.raises(ValueError, match="needs a display"):
+        view("go_to_pose")
 
 
 @pytest.mark.parametrize(

@@ -19,11 +19,10 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from controllers.estimation import DeadReckoning, EstimatorParams, rotation_from_rpy, wrap_angle
+from controllers.estimation import rotation_from_rpy, wrap_angle
 from envs.rendering import CAMERA_SCENE_OPTION
 from envs.scenario import Scenario, load_scenario, with_frame
 from envs.simulation import Simulation
-from envs.world import DEPTH_SENSOR_POSITION
 
 ACTIONS = ("pilot", "thrusters")
 IMAGES = (None, "left", "stereo")
@@ -105,7 +104,8 @@ def _has_display() -> bool:
 class MapTidalEnv(gymnasium.Env):
     """Base class: one robot, estimated state, Box(-1, 1) actions, Dict or flat observations.
 
-    ``render_mode="human"`` is offered only where a display exists."""
+    ``render_mode="human"`` is offered only where a display exists (Gymnasium's checker builds the
+    environment in every mode the metadata lists); asked for without one, the constructor says why."""
 
     metadata: ClassVar[dict] = {
         "render_modes": ["rgb_array", *(["human"] if _has_display() else [])],
@@ -119,10 +119,14 @@ class MapTidalEnv(gymnasium.Env):
         **options,
     ) -> None:
         self.options = EnvOptions.checked(options)
-        if render_mode not in (None, *self.metadata["render_modes"]):
-            hint = "" if _has_display() else " ('human' needs a display)"
+        if render_mode == "human" and not _has_display():
             raise ValueError(
-                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}{hint}"
+                "render_mode='human' opens MuJoCo's viewer, which needs a display (DISPLAY or "
+                "WAYLAND_DISPLAY is unset); use render_mode='rgb_array' when headless"
+            )
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
             )
         self.render_mode = render_mode
         base = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
@@ -143,7 +147,7 @@ class MapTidalEnv(gymnasium.Env):
             self.observation_space = spaces.Box(-np.inf, np.inf, (size,), np.float32)
         else:
             self.observation_space = self._dict_space
-        self._estimator: DeadReckoning | None = None
+        self.sim.track_estimate(self.robot)  # the observation's estimate, in MANUAL too
         self._steps = 0
         self._renderer: mujoco.Renderer | None = None
         self._viewer = None
@@ -170,15 +174,16 @@ class MapTidalEnv(gymnasium.Env):
         super().reset(seed=seed)
         self.sim.reset(seed=int(self.np_random.integers(2**31 - 1)))
         self._steps = 0
-        self._start_episode()
-        truth = self.sim.ground_truth(self.robot)
-        params = EstimatorParams(
-            self.scenario.tank.height, DEPTH_SENSOR_POSITION, self.vehicle.sensors.dvl_position
-        )
-        self._estimator = DeadReckoning(params, truth["position"], truth["rpy"][2])
-        self._readings = self.sim.sensors(self.robot)
-        self._estimate = self._estimator.update(self._readings, self.scenario.control_period_s)
+        self._start_episode()  # placing the robot restarts the simulation's estimator there
         return self._observation(), {}
+
+    @property
+    def _estimate(self):
+        return self.sim.estimate(self.robot)
+
+    @property
+    def _readings(self) -> dict:
+        return self.sim.latest_readings(self.robot)
 
     def step(self, action):
         """Hold ``action`` for one control period (``control_period_s``)."""
@@ -201,8 +206,6 @@ class MapTidalEnv(gymnasium.Env):
         for _ in range(self.substeps):
             self._before_substep()
             self.sim.step({self.robot: a}, mode=mode)
-            self._readings = self.sim.sensors(self.robot)
-            self._estimate = self._estimator.update(self._readings, self.scenario.control_period_s)
             energy += float(np.mean(self.sim.thruster_outputs(self.robot) ** 2))
         self._energy = energy / self.substeps
         self._steps += 1

@@ -13,7 +13,7 @@ state, observations, reward and termination. No second world is built.
 
 One ``env.step`` is one control period of the Gymnasium task (0.1 s by default); the physics steps
 underneath it run through the Simulation (mixer, thrust curve, flight mode, sensors), as in the
-Gymnasium task. Where a display exists, ``dm_control.viewer.launch(load("go_to_pose"))`` shows it.
+Gymnasium task. Where a display exists, :func:`view` (``dm_control.viewer.launch``) shows a task.
 """
 
 from __future__ import annotations
@@ -116,3 +116,15 @@ def load(task: str, seed: int | None = None, **options) -> control.Environment:
     return control.Environment(
         physics, GymTask(task_env, seed), time_limit=task_env.options.episode_s, n_sub_steps=1
     )
+
+
+def view(task: str, policy=None, seed: int | None = None, **options) -> None:
+    """Show ``task`` in ``dm_control.viewer`` (needs a display), flown by ``policy`` (a function of the
+    ``TimeStep`` that returns a 6-vector; none: the viewer's zero action)."""
+    from envs.gym.core import _has_display
+
+    if not _has_display():
+        raise ValueError("dm_control.viewer needs a display (DISPLAY or WAYLAND_DISPLAY is unset)")
+    from dm_control import viewer
+
+    viewer.launch(lambda: load(task, seed=seed, **options), policy=policy)

@@ -45,9 +45,11 @@ class WallCoverage:
 
     def look(self, viewpoints: np.ndarray) -> int:
         """Count what the viewpoints ``(N, 6)`` see; the number of voxels newly seen."""
-        new = (self.model.views(viewpoints) > 0) & ~self.seen
-        self.seen |= new
-        return int(new.sum())
+        # rays go only to voxels not yet seen: a robot looking at what it has seen casts none
+        unseen = np.flatnonzero(~self.seen)
+        new = unseen[self.model.views(viewpoints, among=unseen) > 0]
+        self.seen[new] = True
+        return len(new)
 
     def summary(self) -> np.ndarray:
         """``(1 + SECTORS,)``: the share seen overall, then per sector."""

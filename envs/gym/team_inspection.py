@@ -11,14 +11,12 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from controllers.estimation import DeadReckoning, EstimatorParams
 from controllers.pose import PoseController
 from controllers.task import TaskExecutor, TaskParams
 from envs.gym.core import SAFE_BOX, EnvOptions, third_person_frame
 from envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
 from envs.scenario import Scenario, load_scenario, with_frame
 from envs.simulation import Simulation
-from envs.world import DEPTH_SENSOR_POSITION
 from maptidal.baselines import voronoi_viewpoints
 
 MAX_ROBOTS = 4
@@ -151,7 +149,8 @@ class TeamInspectionEnv(gymnasium.Env):
         self.observation_space = spaces.Dict({name: per_robot for name in self.agents})
         self.walls = WallCoverage(self.scenario.tank)
         self.coverage = self.walls.model
-        self._estimators: dict[str, DeadReckoning] = {}
+        for name in self.agents:
+            self.sim.track_estimate(name)  # the observations' estimates, in MANUAL too
         # STABILIZE holds roll and pitch, so the pose controllers of the tasks mode leave them alone
         self._controllers = {
             name: PoseController(self.vehicle.controller_model(), hold_roll_pitch=False)
@@ -172,17 +171,6 @@ class TeamInspectionEnv(gymnasium.Env):
                     break
             placed.append(position)
             self.sim.place(name, position, float(self.np_random.uniform(-math.pi / 3, math.pi / 3)))
-        params = EstimatorParams(
-            self.scenario.tank.height, DEPTH_SENSOR_POSITION, self.vehicle.sensors.dvl_position
-        )
-        self._estimators, self._estimates, self._readings = {}, {}, {}
-        for name in self.agents:
-            truth = self.sim.ground_truth(name)
-            self._estimators[name] = DeadReckoning(params, truth["position"], truth["rpy"][2])
-            self._readings[name] = self.sim.sensors(name)
-            self._estimates[name] = self._estimators[name].update(
-                self._readings[name], self.scenario.control_period_s
-            )
         self.walls.reset()
         self.tasks_done = np.zeros(len(self.tasks), bool)
         self._episode_start = self.sim.time
@@ -209,10 +197,6 @@ class TeamInspectionEnv(gymnasium.Env):
         for _ in range(self.substeps):
             self.sim.step(commands, mode=mode)
             for name in self.agents:
-                self._readings[name] = self.sim.sensors(name)
-                self._estimates[name] = self._estimators[name].update(
-                    self._readings[name], self.scenario.control_period_s
-                )
                 energy += float(np.mean(self.sim.thruster_outputs(name) ** 2))
         self._steps += 1
         new = self._look()
@@ -237,7 +221,7 @@ class TeamInspectionEnv(gymnasium.Env):
         executors = {
             name: TaskExecutor(
                 self._controllers[name],
-                self._estimates[name],
+                self.sim.estimate(name),
                 self.tasks[k, :3],
                 float(self.tasks[k, 3]),
                 params,
@@ -251,13 +235,10 @@ class TeamInspectionEnv(gymnasium.Env):
         while any(s not in ("capture", "timeout") for s in status.values()):
             commands = {}
             for name in self.agents:
-                commands[name], now = executors[name].update(self._estimates[name], period)
+                commands[name], now = executors[name].update(self.sim.estimate(name), period)
                 if status[name] not in ("capture", "timeout"):
                     status[name] = now
             self.sim.step(commands)
-            for name in self.agents:
-                self._readings[name] = self.sim.sensors(name)
-                self._estimates[name] = self._estimators[name].update(self._readings[name], period)
             if self.sim.contacts():
                 collided = True
                 break
@@ -294,7 +275,7 @@ class TeamInspectionEnv(gymnasium.Env):
         positions = {name: np.asarray(self.sim.ground_truth(name)["position"]) for name in self.agents}
         out = {}
         for name in self.agents:
-            e, readings = self._estimates[name], self._readings[name]
+            e, readings = self.sim.estimate(name), self.sim.latest_readings(name)
             others = [positions[other] - e.position for other in self.agents if other != name]
             entry = {
                 "pose": np.r_[e.position, e.rpy],
