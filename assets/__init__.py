@@ -1,1 +1,2 @@
-"""maptidal's bundled data (tank, robots, scenarios), installed as ``maptidal.assets``; see maptidal/paths.py."""
+"""maptidal's bundled data (tank, robots, scenarios), installed as ``maptidal.assets``
+(see maptidal/paths.py)."""

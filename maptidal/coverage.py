@@ -102,8 +102,8 @@ def views_per_point(
 ) -> np.ndarray:
     """For each point, the number of viewpoints whose frustum contains it.
 
-    With ``occluders`` (triangles ``(T, 3, 3)``, or :class:`maptidal.raycast.Occluders`), a point counts for a viewpoint
-    only when the ray to it is not blocked more than ``tolerance`` m before it.
+    With ``occluders`` (triangles ``(T, 3, 3)``, or :class:`maptidal.raycast.Occluders`), a point
+    counts for a viewpoint only when the ray to it is not blocked more than ``tolerance`` m before it.
     """
     viewpoints = np.asarray(viewpoints, float).reshape(-1, 6)
     points = np.asarray(points, float).reshape(-1, 3)
