@@ -9,7 +9,7 @@ RUN_DIR ?= runs/default
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: setup run test bench lint clean
+.PHONY: setup run test bench golden lint clean
 
 setup: $(STAMP)
 
@@ -37,6 +37,12 @@ bench: setup
 	$(BIN)/python tests/bench/bench_coverage.py
 	$(BIN)/python tests/bench/bench_sim.py
 	$(BIN)/python tests/bench/bench_allocation.py
+	$(BIN)/python tests/bench/bench_gym.py
+	$(BIN)/python tests/bench/bench_frontend.py
+
+# regenerate the front end's golden frames and outputs (tests/data/golden_frames) on purpose; prints what changed
+golden: setup
+	$(BIN)/python tests/data/make_golden.py
 
 lint: setup
 	$(BIN)/ruff check maptidal envs controllers tests

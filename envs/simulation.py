@@ -177,9 +177,10 @@ class Simulation:
         for robot, mode in self._flight_modes.items():
             self.set_flight_mode(robot, mode)
 
-    def place(self, robot: str, position, yaw_rad: float = 0.0) -> None:
+    def place(self, robot: str, position, yaw_rad: float = 0.0, quaternion=None) -> None:
         """Put ``robot`` at ``position`` (m, world) with heading ``yaw_rad`` (counter-clockwise from +x),
-        level and at rest, thrusters idle; its flight mode's estimator restarts there."""
+        level, or with the attitude ``quaternion`` (w, x, y, z) when given; at rest, thrusters idle; its
+        flight mode's estimator restarts there."""
         slot = self._slots[self._check(robot)]
         values = np.asarray(position, float)
         if values.shape != (3,) or not np.all(np.isfinite(values)) or not math.isfinite(yaw_rad):
@@ -188,8 +189,16 @@ class Simulation:
             )
         joint = self.model.body_jntadr[slot.body_id]
         qpos = self.model.jnt_qposadr[joint]
+        attitude = np.array([math.cos(yaw_rad / 2), 0.0, 0.0, math.sin(yaw_rad / 2)])
+        if quaternion is not None:
+            attitude = np.asarray(quaternion, float)
+            if attitude.shape != (4,) or not np.all(np.isfinite(attitude)) or np.linalg.norm(attitude) < 1e-9:
+                raise ValueError(
+                    f"{robot}: a quaternion is four finite numbers, not all zero; got {quaternion}"
+                )
+            attitude = attitude / np.linalg.norm(attitude)
         self.data.qpos[qpos : qpos + 3] = values
-        self.data.qpos[qpos + 3 : qpos + 7] = [math.cos(yaw_rad / 2), 0.0, 0.0, math.sin(yaw_rad / 2)]
+        self.data.qpos[qpos + 3 : qpos + 7] = attitude
         self.data.qvel[slot.dof_adr : slot.dof_adr + 6] = 0.0
         n = self._specs[robot].vehicle.n_thrusters
         self.data.act[slot.act_adr : slot.act_adr + n] = 0.0

@@ -28,7 +28,7 @@ from maptidal.baselines import (
 )
 from maptidal.camera import StereoCameraParams
 from maptidal.coverage import CoverageModel, CoverageParams, CoverageReport
-from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
+from maptidal.discovery import DiscoveryInputError, DiscoveryParams, DiscoveryResult, discover
 from maptidal.files import atomic_write_json, atomic_write_text, save_tasks
 from maptidal.free_space import free_space_counts, free_space_mask
 from maptidal.keyframes import (
@@ -89,6 +89,8 @@ class MapTidalRun:
 
     tasks: np.ndarray
     frames: list[dict]
+    # per frame, every stage of its discovery (None where the frame was skipped): for Fig. 4-style pictures
+    results: list[DiscoveryResult | None] = field(default_factory=list, repr=False)
 
 
 def config_keyframes(tank: TankModel, config: EvaluationConfig) -> list[Keyframe]:
@@ -171,17 +173,20 @@ def discover_over_keyframes(
     that fail :func:`maptidal.free_space.free_space_mask` on that tank are dropped (and counted).
     """
     tasks = np.empty((0, 6))
-    frames = []
+    frames, results = [], []
     for index, keyframe in enumerate(keyframes):
         record: dict = {"frame": index, "faces": len(keyframe.mesh.faces)}
         if len(keyframe.mesh.faces) == 0:
             frames.append({**record, "skipped": "empty mesh"})
+            results.append(None)
             continue
         try:
             result = discover(keyframe.mesh.vertices, keyframe.mesh.faces, existing=tasks, params=params)
         except DiscoveryInputError as err:
             frames.append({**record, "skipped": str(err)})
+            results.append(None)
             continue
+        results.append(result)
         new = result.final
         if free_space_tank is not None and len(new):
             keep = free_space_mask(free_space_tank, new, params.standoff)
@@ -189,7 +194,7 @@ def discover_over_keyframes(
             new = new[keep]
         tasks = np.vstack([tasks, new])
         frames.append({**record, **result.counts, "mode": result.pruning_mode, "total_tasks": len(tasks)})
-    return MapTidalRun(tasks, frames)
+    return MapTidalRun(tasks, frames, results)
 
 
 def method_viewpoints(
@@ -250,11 +255,14 @@ def run_compare(
     config: EvaluationConfig | None = None,
     plots: bool = True,
     progress: bool = True,
+    rendered: list[Keyframe] | None = None,
 ) -> dict:
     """Run the three methods on one voxelised tank; write tasks, JSON, plots and report.md.
 
     Returns ``{"methods": {name: {tasks, pct_uninspected, mean_views, mad}}, ...}``.
-    With ``out_dir`` None nothing is written.
+    With ``out_dir`` None nothing is written. With ``rendered`` keyframes (from rendered stereo frames,
+    :mod:`maptidal.frame_discovery`), Map-TIDAL also runs on them, reported beside the synthetic
+    keyframes' run as ``maptidal_rendered``.
     """
     config = config or EvaluationConfig()
     tank = TankModel(load_tank_config(config.tank_path))
@@ -264,6 +272,12 @@ def run_compare(
     keyframes = config_keyframes(tank, config)
     bar.advance(note=f"{len(keyframes)} keyframes")
     viewpoints, run = method_viewpoints(tank, config, keyframes)
+    rendered_run = None
+    if rendered is not None:
+        rendered_run = discover_over_keyframes(
+            rendered, config.discovery, tank if config.free_space else None
+        )
+        viewpoints["maptidal_rendered"] = rendered_run.tasks
     bar.advance(note="viewpoints")
     reports, views = {}, {}
     for name, rows in viewpoints.items():
@@ -279,6 +293,7 @@ def run_compare(
         "coverage": {**config.coverage.__dict__},
         "discovery": config.discovery.to_dict(),
         "keyframes": run.frames,
+        "keyframes_rendered": None if rendered_run is None else rendered_run.frames,
         "faces_within_theta_ex_of_a_surface_normal": wall_aligned_fraction(
             tank, keyframes, config.discovery.theta_ex
         ),

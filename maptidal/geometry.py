@@ -330,3 +330,34 @@ def view_angles(direction: np.ndarray, others: np.ndarray) -> np.ndarray:
     vectors gives 0 rather than NaN.
     """
     return np.arccos(np.clip(np.asarray(others) @ np.asarray(direction), -1.0, 1.0))
+
+
+def point_triangle_distances(points: np.ndarray, triangles: np.ndarray, chunk: int = 256) -> np.ndarray:
+    """Distance from each point ``(N, 3)`` to the nearest of ``triangles`` ``(T, 3, 3)``, exactly: the
+    distance to the plane where the point projects inside a triangle, else to the nearest edge."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    triangles = np.asarray(triangles, float).reshape(-1, 3, 3)
+    best = np.full(len(points), np.inf)
+    if len(points) == 0 or len(triangles) == 0:
+        return best
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    normal = _cross_rows(b - a, c - a)
+    area2 = np.linalg.norm(normal, axis=1)
+    unit = normal / np.where(area2 > 0, area2, 1.0)[:, None]
+    for start in range(0, len(points), chunk):
+        p = points[start : start + chunk, None, :]  # (n, 1, 3) against (T, 3)
+        height = np.einsum("ntk,tk->nt", p - a, unit)
+        foot = p - height[..., None] * unit
+        # barycentric signs: the foot is inside when it lies left of every edge (in the normal's sense)
+        inside = area2 > 0
+        for u, v in ((a, b), (b, c), (c, a)):
+            inside = inside & (np.einsum("ntk,tk->nt", np.cross(v - u, foot - u), unit) >= 0)
+        distance = np.where(inside, np.abs(height), np.inf)
+        for u, v in ((a, b), (b, c), (c, a)):
+            edge = v - u
+            length2 = np.maximum(np.einsum("tk,tk->t", edge, edge), 1e-300)
+            s = np.clip(np.einsum("ntk,tk->nt", p - u, edge) / length2, 0.0, 1.0)
+            nearest = u + s[..., None] * edge
+            distance = np.minimum(distance, np.linalg.norm(p - nearest, axis=2))
+        best[start : start + chunk] = distance.min(axis=1)
+    return best

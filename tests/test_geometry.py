@@ -15,6 +15,7 @@ from maptidal.geometry import (
     frustum_corners,
     frustum_count_bounds,
     in_frustum,
+    point_triangle_distances,
 )
 
 
@@ -119,3 +120,27 @@ def test_count_bounds_bracket_the_exact_count(seed, cell, flat):
     lower, upper = frustum_count_bounds(viewpoints, points, camera, cell_size=cell, max_pairs=5000)
     assert np.all(lower <= exact) and np.all(exact <= upper)
     assert upper.sum() > 0
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 10_000))
+def test_point_triangle_distance_agrees_with_dense_sampling(seed):
+    """Against the nearest of a 300 x 300 barycentric grid of points on each triangle (independent of the
+    plane-or-edge rule): equal within the grid's spacing."""
+    rng = np.random.default_rng(seed)
+    triangles = rng.uniform(-1, 1, size=(3, 3, 3))
+    points = rng.uniform(-2, 2, size=(15, 3))
+    ours = point_triangle_distances(points, triangles)
+    s, t = np.meshgrid(np.linspace(0, 1, 300), np.linspace(0, 1, 300))
+    keep = s + t <= 1.0
+    s, t = s[keep], t[keep]
+    samples = np.concatenate(
+        [tri[0] + s[:, None] * (tri[1] - tri[0]) + t[:, None] * (tri[2] - tri[0]) for tri in triangles]
+    )
+    spacing = (
+        max(np.linalg.norm(tri[i] - tri[j]) for tri in triangles for i in range(3) for j in range(3)) / 299
+    )
+    for point, distance in zip(points, ours, strict=True):
+        sampled = np.linalg.norm(samples - point, axis=1).min()
+        assert distance <= sampled + 1e-12
+        assert sampled - distance <= spacing

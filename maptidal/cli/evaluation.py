@@ -53,6 +53,14 @@ def register(commands) -> None:
         "7 keyframes rising 0.5 m 1 m in front of the end wall (paper)",
     )
     compare.add_argument(
+        "--keyframes",
+        choices=("synthetic", "rendered"),
+        default="synthetic",
+        help="synthetic keyframes only (default), or also keyframes from rendered stereo frames: the robot "
+        "flies the --capture path in the simulator and the stereo front end meshes its frames; both "
+        "Map-TIDAL runs are reported side by side",
+    )
+    compare.add_argument(
         "--free-space",
         action="store_true",
         help="drop Map-TIDAL tasks outside the water or without a line of sight to their target "
@@ -227,7 +235,10 @@ def run_compare(args: argparse.Namespace) -> int:
     from maptidal.evaluation import comparison_table, run_compare
 
     out = None if args.no_write else args.out
-    document = run_compare(out, _evaluation_config(args), plots=not args.no_plots, progress=not args.json)
+    rendered = _rendered_keyframes(args, out) if args.keyframes == "rendered" else None
+    document = run_compare(
+        out, _evaluation_config(args), plots=not args.no_plots, progress=not args.json, rendered=rendered
+    )
     if args.json:
         print(json.dumps({"methods": document["methods"]}))
         return 0
@@ -237,6 +248,25 @@ def run_compare(args: argparse.Namespace) -> int:
     if out:
         print(f"report: {Path(out) / 'report.md'}")
     return 0
+
+
+def _rendered_keyframes(args: argparse.Namespace, out: Path | None):
+    """Fly the --capture path in the simulator (the default scenario), run the front end on its frames
+    (ground-truth poses; the first 7 keyframes on the paper path) and return the keyframes."""
+    import tempfile
+
+    from maptidal.frame_discovery import discover_on_recording
+    from maptidal.mission.capture import CaptureParams, capture
+    from maptidal.perception.frontend import FrontEndParams
+
+    if args.tank is not None:
+        raise ValueError("--keyframes rendered flies the default scenario's tank; drop --tank")
+    with tempfile.TemporaryDirectory() as scratch:
+        folder = Path(out) / "recording" if out is not None else Path(scratch)
+        recording = capture(folder, params=CaptureParams(path=args.capture), seed=args.seed)
+        limit = 7 if args.capture == "paper" else None
+        result = discover_on_recording(recording, "truth", FrontEndParams(max_keyframes=limit))
+        return result.run.discovery_keyframes
 
 
 def run_sweep(args: argparse.Namespace) -> int:

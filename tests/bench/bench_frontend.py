@@ -1,53 +1,71 @@
-"""Benchmark the stereo front end's stages so far (detection, matching, triangulation) per frame, as a
-ratio to rendering the stereo pair in the same process (issue [perception]'s goal: the whole front end
-at most 1.5x the render).
+"""Benchmark the stereo front end stage by stage, per frame, as a ratio to rendering the stereo pair in the
+same process (issue [perception]'s goal: the whole front end at most 1.5x the render).
 
-    python tests/bench/bench_frontend.py [--frames N]
+Captures the paper's path (5 frames/s), renders each recorded pose again to time the render, then runs
+the front end and discovery over the recording with each pose source and each detector.
+
+    python tests/bench/bench_frontend.py [--keyframes N]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import tempfile
 import time
-
-import numpy as np
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from envs.simulation import Simulation
-from maptidal.perception.stereo import DETECTORS, StereoParams, detect_keypoints, match_stereo, triangulate
+from maptidal.frame_discovery import discover_on_recording
+from maptidal.mission.capture import CaptureParams, capture, place_camera
+from maptidal.perception.frontend import FrontEndParams
+from maptidal.perception.stereo import DETECTORS, StereoParams
+
+STAGES = (
+    "detection",
+    "tracking",
+    "matching",
+    "triangulation",
+    "localisation",
+    "fusion",
+    "meshing",
+    "discovery",
+)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=10, help="frames per measurement")
+    parser.add_argument(
+        "--keyframes", type=int, default=7, help="keyframes to process (default 7, the paper's)"
+    )
     args = parser.parse_args()
-    sim = Simulation()
-    sim.reset(seed=0)
-    K = np.array(sim.intrinsics()["K"])
-    baseline = sim.intrinsics()["baseline_m"]
-    left, right = sim.render_stereo("rov0")
-    start = time.perf_counter()
-    for _ in range(args.frames):
-        sim.render_stereo("rov0")
-    render = (time.perf_counter() - start) / args.frames
-    print(f"stereo render (640x400, water model): {1000 * render:.1f} ms")
-    print("| detector | detect ms | match ms | triangulate ms | total / render |\n|---|---|---|---|---|")
-    for detector in DETECTORS:
-        params = StereoParams(detector=detector)
-        times = np.zeros(3)
-        for _ in range(args.frames):
-            t0 = time.perf_counter()
-            keypoints = detect_keypoints(left, params)
-            t1 = time.perf_counter()
-            disparity = match_stereo(left, right, keypoints, params)
-            t2 = time.perf_counter()
-            triangulate(keypoints, disparity, K[0, 0], K[1, 1], K[0, 2], K[1, 2], baseline, params)
-            times += [t1 - t0, t2 - t1, time.perf_counter() - t2]
-        times /= args.frames
-        ms = " | ".join(f"{1000 * t:.1f}" for t in times)
-        print(f"| {detector} | {ms} | {times.sum() / render:.2f} |")
+    with tempfile.TemporaryDirectory() as scratch:
+        recording = capture(scratch, params=CaptureParams(path="paper"), seed=0)
+        sim = Simulation()
+        frames = recording.frames[:40]
+        start = time.perf_counter()
+        for frame in frames:
+            place_camera(sim, "rov0", frame.poses["truth"])
+            sim.render_stereo("rov0")
+        render = (time.perf_counter() - start) / len(frames)
+        sim.close()
+        print(
+            f"stereo render (640x400, water model, {sim.water_backend}): {1000 * render:.1f} ms per frame\n"
+        )
+        print("| detector | pose | frames | " + " | ".join(STAGES) + " | total ms/frame | total / render |")
+        print("|---|---|---|" + "---|" * (len(STAGES) + 2))
+        for detector in DETECTORS:
+            for source in ("truth", "vo") if detector == "orb" else ("truth",):
+                params = FrontEndParams(stereo=StereoParams(detector=detector), max_keyframes=args.keyframes)
+                result = discover_on_recording(recording, source, params)
+                n = len(result.run.frames)
+                per_frame = {stage: result.run.timings.get(stage, 0.0) / n for stage in STAGES}
+                total = sum(per_frame.values())
+                cells = " | ".join(f"{1000 * per_frame[stage]:.1f}" for stage in STAGES)
+                print(
+                    f"| {detector} | {source} | {n} | {cells} | {1000 * total:.1f} | {total / render:.2f} |"
+                )
 
 
 if __name__ == "__main__":

@@ -1,0 +1,250 @@
+"""The stereo front end, frame by frame: from a recording's images and poses to Kimera-style keyframe meshes
+(issue [perception]). OpenCV, numpy and trimesh only: it reads a recording folder
+(:mod:`maptidal.perception.recording`), never the simulator, so a real OAK-D recording runs the same way.
+
+Each frame:
+
+1. **Track** the left image's keypoints from the last frame with KLT, refilling thin grid cells
+   (:class:`~maptidal.perception.tracking.LandmarkTracker`): a keypoint keeps its landmark id while it is
+   tracked (Fig. 4A's green), new ones get new ids (red).
+2. **Match** each keypoint along its row in the right image and **triangulate** it
+   (:mod:`~maptidal.perception.stereo`), inside the depth band.
+3. **Localise** the camera by the chosen pose source: ``truth``, ``dr`` (the robot's dead reckoning,
+   recorded beside the images) or ``vo`` (dead reckoning corrected by frame-to-frame PnP on the tracked
+   landmarks, :mod:`~maptidal.perception.odometry`).
+4. **Fuse** the observations into world-frame landmarks, weighted by their stereo covariance, outliers
+   rejected (:mod:`~maptidal.perception.landmarks`).
+5. At a **keyframe** (:mod:`~maptidal.perception.keyframing`), mesh the keypoints matched in this frame at
+   their fused landmark positions with :func:`maptidal.perception.mesher.kimera_mesh`, ready for
+   discovery.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+
+from maptidal.geometry import point_triangle_distances
+from maptidal.keyframes import Keyframe
+from maptidal.perception.keyframing import KeyframeParams, KeyframeSelector
+from maptidal.perception.landmarks import FusionParams, LandmarkMap, stereo_covariances
+from maptidal.perception.mesher import MesherParams, kimera_mesh
+from maptidal.perception.odometry import OdometryParams, VisualOdometry, relative_motion
+from maptidal.perception.recording import CameraIntrinsics, CameraPose, Recording, RecordingError
+from maptidal.perception.stereo import FrontEndInputError, StereoParams, match_stereo, triangulate
+from maptidal.perception.tracking import LandmarkTracker, TrackerParams
+
+POSE_SOURCES = ("truth", "dr", "vo")
+
+
+@dataclass(frozen=True)
+class FrontEndParams:
+    """Every stage's settings; ``max_keyframes`` stops after that many keyframes (the paper used its
+    first 7)."""
+
+    stereo: StereoParams = field(default_factory=StereoParams)
+    tracker: TrackerParams = field(default_factory=TrackerParams)
+    fusion: FusionParams = field(default_factory=FusionParams)
+    keyframes: KeyframeParams = field(default_factory=KeyframeParams)
+    mesher: MesherParams = field(default_factory=MesherParams)
+    odometry: OdometryParams = field(default_factory=OdometryParams)
+    max_keyframes: int | None = None
+
+
+@dataclass
+class FrameRecord:
+    """What one frame gave: keypoints (and how many were tracked from the last frame), stereo matches,
+    PnP inliers (vo only), the pose used, and whether it became a keyframe."""
+
+    index: int
+    time_s: float
+    keypoints: int
+    tracked: int
+    matched: int
+    pnp_inliers: int | None
+    pose: CameraPose
+    keyframe: bool = False
+
+
+@dataclass
+class KeyframeOutput:
+    """A keyframe for discovery (:class:`maptidal.keyframes.Keyframe`) and what its overlays show: the
+    frame it came from, its keypoints (pixels), which were tracked, and the observations per vertex."""
+
+    keyframe: Keyframe
+    frame_index: int
+    pixels: np.ndarray
+    tracked: np.ndarray
+    observations: np.ndarray
+
+
+class FrontEnd:
+    """Runs the module's five steps on one frame at a time (:meth:`process`)."""
+
+    def __init__(
+        self, intrinsics: CameraIntrinsics, pose_source: str = "truth", params: FrontEndParams | None = None
+    ):
+        if pose_source not in POSE_SOURCES:
+            raise ValueError(f"pose source must be one of {POSE_SOURCES}, got {pose_source!r}")
+        self.intrinsics = intrinsics
+        self.pose_source = pose_source
+        self.params = params or FrontEndParams()
+        tracker = self.params.tracker
+        if tracker.keypoints != self.params.stereo:
+            tracker = TrackerParams(
+                tracker.window_px, tracker.pyramid_levels, tracker.forward_backward_px, self.params.stereo
+            )
+        self.tracker = LandmarkTracker(tracker)
+        self.landmarks = LandmarkMap(self.params.fusion)
+        self.selector = KeyframeSelector(self.params.keyframes)
+        self.odometry = VisualOdometry(self.params.odometry)
+        self._previous_points: dict[int, np.ndarray] = {}
+        self.keyframes_made = 0
+        self._stage_s = dict.fromkeys(("matching", "triangulation", "localisation", "fusion", "meshing"), 0.0)
+
+    @property
+    def timings(self) -> dict[str, float]:
+        """Seconds spent so far in each stage (tracking, detection, matching, triangulation,
+        localisation, fusion, meshing), for benchmarks."""
+        return {**self.tracker.timings, **self._stage_s}
+
+    def process(
+        self, index: int, time_s: float, left: np.ndarray, right: np.ndarray, pose: CameraPose
+    ) -> tuple[FrameRecord, KeyframeOutput | None]:
+        """One frame; ``pose`` is the source's pose (for ``vo``, the dead-reckoned one it corrects)."""
+        k = self.intrinsics
+        clock = self._stage_s
+        ids, pixels, tracked = self.tracker.update(left)
+        start = time.perf_counter()
+        disparity = match_stereo(left, right, pixels, self.params.stereo)
+        clock["matching"] += time.perf_counter() - start
+        start = time.perf_counter()
+        points_camera, kept = triangulate(
+            pixels, disparity, k.fx, k.fy, k.cx, k.cy, k.baseline_m, self.params.stereo
+        )
+        clock["triangulation"] += time.perf_counter() - start
+        start = time.perf_counter()
+        inliers = None
+        if self.pose_source == "vo":
+            common = [row for row in np.flatnonzero(tracked) if int(ids[row]) in self._previous_points]
+            motion = None
+            if common:
+                previous = np.array([self._previous_points[int(ids[row])] for row in common])
+                motion = relative_motion(previous, pixels[common], k.matrix, self.params.odometry)
+                inliers = 0 if motion is None else motion[2]
+            pose = self.odometry.update(pose, motion)
+        self._previous_points = {int(ids[row]): points_camera[n] for n, row in enumerate(kept)}
+        clock["localisation"] += time.perf_counter() - start
+        start = time.perf_counter()
+        covariances = stereo_covariances(points_camera, disparity[kept], k.fx, self.params.fusion)
+        world = pose.to_world(points_camera)
+        world_covariances = pose.rotation @ covariances @ pose.rotation.T
+        if self.pose_source != "truth":
+            world_covariances = world_covariances + self.params.fusion.pose_sigma_m**2 * np.eye(3)
+        if self.params.fusion.enabled:
+            self.landmarks.add(ids[kept], world, world_covariances)
+        clock["fusion"] += time.perf_counter() - start
+        record = FrameRecord(index, time_s, len(ids), int(tracked.sum()), len(kept), inliers, pose)
+        limit = self.params.max_keyframes
+        if limit is not None and self.keyframes_made >= limit:
+            return record, None
+        if not self.selector.is_keyframe(time_s, pose):
+            return record, None
+        record.keyframe = True
+        start = time.perf_counter()
+        landmarks = np.full((len(ids), 3), np.nan)
+        if self.params.fusion.enabled:
+            landmarks[kept] = self.landmarks.positions(ids[kept])
+        else:
+            landmarks[kept] = world
+        mesh = kimera_mesh(
+            pixels, landmarks, (k.width, k.height), pose.position, pose.forward, self.params.mesher
+        )
+        keyframe = Keyframe(pose.position, pose.forward, pixels, landmarks, ids, mesh)
+        observations = (
+            self.landmarks.observations(ids[mesh.keypoint_ids])
+            if len(mesh.keypoint_ids)
+            else np.zeros(0, int)
+        )
+        self.keyframes_made += 1
+        clock["meshing"] += time.perf_counter() - start
+        return record, KeyframeOutput(keyframe, index, pixels, tracked, observations)
+
+
+@dataclass
+class FrontEndRun:
+    """A whole recording through the front end: per-frame records and the keyframes."""
+
+    pose_source: str
+    frames: list[FrameRecord]
+    keyframes: list[KeyframeOutput]
+    rejected_observations: int
+    timings: dict[str, float] = field(default_factory=dict)  # seconds per stage (FrontEnd.timings)
+
+    @property
+    def discovery_keyframes(self) -> list[Keyframe]:
+        """The keyframes as :func:`maptidal.evaluation.discover_over_keyframes` takes them."""
+        return [output.keyframe for output in self.keyframes]
+
+
+def run_frontend(
+    recording: Recording,
+    pose_source: str = "truth",
+    params: FrontEndParams | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> FrontEndRun:
+    """Run the front end over every frame of ``recording`` (stopping after ``max_keyframes``). The ``dr``
+    and ``vo`` sources need the recording's ``dr`` poses (or a real vehicle's ``estimate``)."""
+    if pose_source not in POSE_SOURCES:
+        raise ValueError(f"pose source must be one of {POSE_SOURCES}, got {pose_source!r}")
+    available = recording.pose_sources()
+    wanted = "truth" if pose_source == "truth" else ("dr" if "dr" in available else "estimate")
+    if wanted not in available:
+        raise RecordingError(
+            f"{recording.root}: --pose {pose_source} needs {wanted!r} poses in every frame; "
+            f"it has {sorted(available)}"
+        )
+    params = params or FrontEndParams()
+    sensors = recording.metadata.get("sensors")
+    if isinstance(sensors, list) and "dvl" not in sensors and params.odometry.has_dvl:
+        # the robot had no DVL: its dead reckoning knows nothing of horizontal motion
+        params = dataclasses.replace(params, odometry=dataclasses.replace(params.odometry, has_dvl=False))
+    front = FrontEnd(recording.intrinsics, pose_source, params)
+    frames, keyframes = [], []
+    for n, frame in enumerate(recording.frames):
+        left, right = recording.images(frame)
+        record, keyframe = front.process(frame.index, frame.time_s, left, right, frame.poses[wanted])
+        frames.append(record)
+        if keyframe is not None:
+            keyframes.append(keyframe)
+        if progress is not None:
+            progress(n + 1, len(recording.frames))
+        if params.max_keyframes is not None and len(keyframes) >= params.max_keyframes:
+            if progress is not None:
+                progress(len(recording.frames), len(recording.frames))  # the rest is not needed
+            break
+    if not any(record.keypoints for record in frames):
+        raise FrontEndInputError(
+            f"{recording.root}: no keypoints in any frame (textureless or blurred images?)"
+        )
+    return FrontEndRun(pose_source, frames, keyframes, front.landmarks.rejected, front.timings)
+
+
+def absolute_trajectory_error(estimated: list[CameraPose], truth: list[CameraPose]) -> float:
+    """RMS position error (m) of an estimated trajectory against the truth, frame by frame. No alignment:
+    every estimate starts at the true pose, as the robot's estimator does when it is armed at a known
+    spot, so the error is the drift itself."""
+    if len(estimated) != len(truth) or not estimated:
+        raise ValueError("the trajectories must be non-empty and of the same length")
+    errors = [np.linalg.norm(e.position - t.position) for e, t in zip(estimated, truth, strict=True)]
+    return float(np.sqrt(np.mean(np.square(errors))))
+
+
+def surface_distances(points: np.ndarray, surface: trimesh.Trimesh) -> np.ndarray:
+    """Distance (m) from each point ``(N, 3)`` to the nearest point of ``surface``."""
+    return point_triangle_distances(points, surface.triangles)
