@@ -117,11 +117,14 @@ def capture(
     seed: int = 0,
     robot: str | None = None,
     progress: Callable[[float, float], None] | None = None,
+    water_backend: str = "auto",
 ) -> Recording:
-    """Fly ``params.path`` in ``scenario`` and write the recording to ``out_dir``; returns it loaded."""
+    """Fly ``params.path`` in ``scenario`` and write the recording to ``out_dir``; returns it loaded.
+    ``water_backend`` is :class:`envs.simulation.Simulation`'s (``"cpu"`` gives the same pixels on every
+    machine)."""
     params = params or CaptureParams()
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    sim = Simulation(scenario, flight_mode="stabilize")
+    sim = Simulation(scenario, flight_mode="stabilize", water_backend=water_backend)
     try:
         return _fly(sim, Path(out_dir), params, seed, robot or sim.robots[0], progress)
     finally:
