@@ -390,6 +390,23 @@ def test_completed_task_leaves_the_auction_everywhere():
     assert all(a.winners()[finished] == DONE for a in simulation.agents.values())
 
 
+def test_a_done_task_stays_done_when_a_peer_that_has_not_heard_still_bids_on_it():
+    """Found by the closed-loop mission: a robot marked a task done, then a message from a peer that had
+    not heard yet, with no DONE entry in it but a bid on that task (the peer's view: robot 0 wins at
+    2.5, or the peer itself wins), made the robot take the task back and inspect it again."""
+    for winner in (0, 1):
+        mine = _agent_with_tasks(0)
+        mine.build_bundle(0.0)
+        key = mine.tasks[mine.bundle[0]].key
+        assert mine.mark_done(key, 1.0)
+        stale = Message(
+            1, 1, np.array([900, 1500]), [], [], np.array([key]), np.array([winner]), np.array([9.5])
+        )
+        assert mine.receive(encode(stale), 2.0)
+        mine.build_bundle(2.5)
+        assert mine.winners()[key] == DONE and key not in mine.path_keys(), winner
+
+
 def test_unreachable_capability_is_reported_infeasible_not_unassigned():
     robots, tasks = random_instance(2, 5, 3)
     tasks[0] = replace(tasks[0], requires=capability_mask(["sonar"]))

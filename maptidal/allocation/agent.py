@@ -445,8 +445,9 @@ class CBBAAgent:
                 self._set(slots[news], DONE, 0.0)
                 self._drop_from_bundle(set(slots[news].tolist()))
                 self.last_change_s = now_s
-            live = (z_k != DONE) & (self.z[slots] != DONE)
-            slots, z_k, y_k = slots[live], z_k[live], y_k[live]
+        # done is final: a peer that has not heard yet (its bid on a task done here) changes nothing
+        live = (z_k != DONE) & (self.z[slots] != DONE)
+        slots, z_k, y_k = slots[live], z_k[live], y_k[live]
         if self.failed:
             gone = np.isin(z_k, list(self.failed))
             z_k, y_k = np.where(gone, NO_WINNER, z_k), np.where(gone, 0.0, y_k)

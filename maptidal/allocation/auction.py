@@ -116,6 +116,7 @@ class AuctionSimulation:
         self._transmitting: dict[int, list[tuple[float, float]]] = {i: [] for i in self.order}
         self.transmissions: list[tuple[float, int, int]] = []
         self.time_s = 0.0
+        self._next_slot = 0  # for advance_to
 
     # ------------------------------------------------------------------ events
     def _apply_event(self, event: AuctionEvent) -> None:
@@ -196,6 +197,18 @@ class AuctionSimulation:
         if any(a.has_pending(self._reachable(a.index, now)) for a in alive):
             return False
         return not any(a.would_bid() for a in alive)
+
+    def advance_to(self, now_s: float) -> int:
+        """Run every TDMA slot due by ``now_s``, for a mission that steps its physics and its auction
+        together; returns how many slots ran. (Do not mix with :meth:`run`.)"""
+        slot_s = self.channel.params.tdma_slot_s
+        ran = 0
+        while self._next_slot * slot_s <= now_s:
+            self._slot(self.order[self._next_slot % len(self.order)], self._next_slot * slot_s)
+            self._next_slot += 1
+            ran += 1
+        self.time_s = now_s
+        return ran
 
     def run(
         self, max_time_s: float = 7200.0, progress: Callable[[float], None] | None = None

@@ -5,6 +5,8 @@ Subcommands:
   demo         discovery over a pass of synthetic keyframes             (cli.discovery)
   capture      fly a scripted path and record stereo frames and poses    (cli.perception)
   discover-frames  the stereo front end and discovery on a recording    (cli.perception)
+  run          the closed-loop mission (started: issue [mission])       (cli.mission)
+  report       rebuild a mission's report from its event log            (cli.mission)
   coverage     views per voxel of a task list on the tank model         (cli.evaluation)
   compare      Map-TIDAL against Voronoi and boustrophedon; `make run`  (cli.evaluation)
   sweep        Map-TIDAL over a grid of t, r_ex, theta_ex (Table I)     (cli.evaluation)
@@ -24,7 +26,7 @@ import sys
 from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, version
 
-from maptidal.cli import allocation, discovery, evaluation, mavlink, perception, world
+from maptidal.cli import allocation, discovery, evaluation, mavlink, mission, perception, world
 from maptidal.cli.common import EXIT_BAD_INPUT, EXIT_INTERRUPTED, Parser, RunError, UsageError
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "build_parser", "main"]
@@ -49,7 +51,7 @@ def build_parser() -> Parser:
     )
     parser.add_argument("--version", action="version", version=f"maptidal {package_version()}")
     commands = parser.add_subparsers(dest="subcommand", required=True, metavar="COMMAND")
-    for group in (discovery, perception, evaluation, world, allocation, mavlink):
+    for group in (discovery, perception, mission, evaluation, world, allocation, mavlink):
         group.register(commands)
     return parser
 

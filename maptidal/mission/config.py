@@ -1,0 +1,66 @@
+"""A mission file: a scenario TOML (``envs.scenario``) with an optional ``[mission]`` table:
+
+    [mission]
+    duration_s = 180
+    [[mission.events]]
+    time_s = 60
+    kind = "fail"          # or "current", with current = [0.1, 0.0, 0.0] (m/s)
+    robot = "rov1"
+
+Anything wrong gives one line naming the file and the value (ValueError).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+from envs.scenario import SCENARIO_DIR, Scenario, ScenarioError, scenario_from_dict
+from maptidal.mission.run import MissionEvent
+
+DEFAULT_MISSION = SCENARIO_DIR / "mission.toml"
+MISSION_KEYS = {"duration_s", "events", "pose_source", "frame_rate_hz"}
+EVENT_KEYS = {"time_s", "kind", "robot", "current"}
+
+
+def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
+    """The scenario and the ``[mission]`` settings (``duration_s``, ``events`` as MissionEvents, ...)."""
+    path = Path(path) if path is not None else DEFAULT_MISSION
+    if not path.exists() and (SCENARIO_DIR / f"{path}.toml").exists():
+        path = SCENARIO_DIR / f"{path}.toml"
+    if not path.is_file():
+        raise ValueError(f"mission scenario not found: {path}")
+    try:
+        document = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ValueError(f"{path}: not valid TOML ({err})") from None
+    table = document.pop("mission", {})
+    try:
+        scenario = scenario_from_dict(document, path.parent)
+    except ScenarioError as err:
+        raise ValueError(f"{path}: {err}") from None
+    if not isinstance(table, dict) or set(table) - MISSION_KEYS:
+        raise ValueError(f"{path}: [mission] takes only {', '.join(sorted(MISSION_KEYS))}")
+    settings = {key: value for key, value in table.items() if key != "events"}
+    events = []
+    for number, entry in enumerate(table.get("events", [])):
+        if (
+            not isinstance(entry, dict)
+            or set(entry) - EVENT_KEYS
+            or "kind" not in entry
+            or "time_s" not in entry
+        ):
+            raise ValueError(f"{path}: mission event {number} needs time_s and kind (and robot or current)")
+        try:
+            events.append(
+                MissionEvent(
+                    float(entry["time_s"]),
+                    str(entry["kind"]),
+                    str(entry.get("robot", "")),
+                    tuple(float(v) for v in entry.get("current", (0.0, 0.0, 0.0))),
+                )
+            )
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"{path}: mission event {number}: {err}") from None
+    settings["events"] = tuple(events)
+    return scenario, settings

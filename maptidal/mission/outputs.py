@@ -1,0 +1,310 @@
+"""A mission's outputs, written as it runs (issue [mission]):
+
+- ``events.jsonl``: the append-only event log, one JSON object per line, flushed as each is written;
+- ``trajectories.csv``: per frame, each robot's true and estimated position;
+- ``images/``: the image captured at each task;
+- ``mission.json``: an atomic snapshot every few simulated seconds, and the final document;
+- at the end: ``top_view.png``, ``histogram.png``, ``voxel_views.png``, ``timeline.png`` and ``report.md``.
+
+A mission killed midway leaves a readable ``events.jsonl`` (at worst its last line cut, which is
+skipped) and its last snapshot; :func:`rebuild` makes ``mission.json``, the plots and ``report.md`` again
+from the log (``maptidal report DIR``).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from maptidal.files import atomic_write_bytes, atomic_write_json, atomic_write_text
+
+EVENTS = "events.jsonl"
+TRAJECTORIES = "trajectories.csv"
+
+
+class MissionWriter:
+    """Writes one mission's outputs into ``out_dir`` (module docstring)."""
+
+    def __init__(self, out_dir) -> None:
+        self.root = Path(out_dir)
+        (self.root / "images").mkdir(parents=True, exist_ok=True)
+        self._events = open(self.root / EVENTS, "w", encoding="utf-8")  # noqa: SIM115 (open for the mission)
+        self._trajectories = open(self.root / TRAJECTORIES, "w", encoding="utf-8")  # noqa: SIM115
+        self._trajectories.write("time_s,robot,true_x,true_y,true_z,est_x,est_y,est_z,true_yaw\n")
+
+    def event(self, time_s: float, kind: str, **fields) -> None:
+        """Append one event to the log and flush it."""
+        self._events.write(json.dumps({"t": round(float(time_s), 3), "kind": kind, **fields}) + "\n")
+        self._events.flush()
+
+    def trajectory(self, time_s: float, poses: dict[str, dict]) -> None:
+        """Append each robot's true and estimated position."""
+        for name, pose in poses.items():
+            values = [*pose["truth"], *pose["estimate"], pose["yaw"]]
+            self._trajectories.write(f"{time_s:.3f},{name}," + ",".join(f"{v:.4f}" for v in values) + "\n")
+        self._trajectories.flush()
+
+    def image(self, name: str, rgb: np.ndarray) -> str:
+        """Write a captured image atomically; returns its path relative to the output folder."""
+        import cv2
+
+        ok, encoded = cv2.imencode(".png", cv2.cvtColor(np.asarray(rgb), cv2.COLOR_RGB2BGR))
+        if not ok:
+            raise ValueError(f"could not encode {name}")
+        atomic_write_bytes(self.root / "images" / name, encoded.tobytes())
+        return f"images/{name}"
+
+    def snapshot(self, document: dict) -> None:
+        """Replace ``mission.json`` atomically."""
+        atomic_write_json(self.root / "mission.json", document)
+
+    def finish(self, document: dict, views: np.ndarray, tank) -> dict:
+        """Add the coverage of the captured views, write ``mission.json``, the plots and ``report.md``."""
+        self._events.close()
+        self._trajectories.close()
+        document["coverage"] = coverage_of(views, tank)
+        atomic_write_json(self.root / "mission.json", document)
+        write_plots(self.root, document, views, tank)
+        atomic_write_text(self.root / "report.md", report_markdown(document))
+        return document
+
+
+def coverage_of(views: np.ndarray, tank) -> dict:
+    """[coverage]'s report of the viewpoints ``(N, 6)``, with occlusion on and off."""
+    from maptidal.coverage import CoverageModel, CoverageParams
+
+    out = {}
+    for occlusion in (True, False):
+        model = CoverageModel.from_tank(tank, CoverageParams(occlusion=occlusion))
+        if len(views) == 0:
+            out["occluded" if occlusion else "unoccluded"] = {"n_viewpoints": 0, "pct_uninspected": 100.0}
+            continue
+        report, _ = model.evaluate(views)
+        out["occluded" if occlusion else "unoccluded"] = report.to_dict()
+    return out
+
+
+def read_events(root) -> list[dict]:
+    """The event log's events (a cut last line, from a killed mission, is skipped)."""
+    events = []
+    for line in (Path(root) / EVENTS).read_text(encoding="utf-8").splitlines():
+        try:
+            events.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return events
+
+
+def write_plots(root: Path, document: dict, views: np.ndarray, tank) -> None:
+    """The top view, the coverage histogram, the views-per-voxel map and the timeline."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from maptidal.coverage import CoverageModel, CoverageParams
+    from maptidal.coverage_plots import plot_histograms, plot_voxel_views
+
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    robots = list(document.get("robots", {}))
+    colour_of = {name: colours[k % len(colours)] for k, name in enumerate(robots)}
+    figure, axis = plt.subplots(figsize=(7, 6))
+    for segment in tank.segments:
+        axis.plot([segment.start[0], segment.end[0]], [segment.start[1], segment.end[1]], "k-", lw=2)
+    rows = _trajectory_rows(root)
+    for name in robots:
+        mine = rows[rows[:, 0] == robots.index(name)] if len(rows) else rows
+        if len(mine):
+            axis.plot(mine[:, 2], mine[:, 3], "-", color=colour_of[name], lw=1.5, label=f"{name} (true path)")
+            axis.plot(mine[:, 5], mine[:, 6], ":", color=colour_of[name], lw=1, label=f"{name} (estimate)")
+    if len(rows):
+        last = {name: rows[rows[:, 0] == k][-1] for k, name in enumerate(robots) if np.any(rows[:, 0] == k)}
+        names = list(last)
+        for a in range(len(names)):
+            for b in range(a + 1, len(names)):
+                pa, pb = last[names[a]], last[names[b]]
+                axis.plot([pa[2], pb[2]], [pa[3], pb[3]], "--", color="0.6", lw=0.8)
+    for task in document.get("tasks", []):
+        colour = colour_of.get(task.get("assigned_to"), "0.5")
+        x, y = task["position"][:2]
+        dx, dy = task["direction"][:2]
+        axis.arrow(
+            x, y, 0.2 * dx, 0.2 * dy, color=colour, head_width=0.05, alpha=1.0 if task["completed"] else 0.35
+        )
+    axis.set_aspect("equal")
+    axis.set_xlabel("x (m)")
+    axis.set_ylabel("y (m)")
+    axis.set_title("Paths, tasks by robot (faint: not done), acoustic links (dashed)")
+    axis.legend(fontsize=7, loc="lower left")
+    figure.tight_layout()
+    figure.savefig(root / "top_view.png", dpi=110)
+    plt.close(figure)
+
+    if len(views):
+        model = CoverageModel.from_tank(tank, CoverageParams(occlusion=True))
+        report, per_voxel = model.evaluate(views)
+        plot_histograms(
+            {"mission": report}, root / "histogram.png", title="Views per voxel against the ideal gamma"
+        )
+        plot_voxel_views(
+            model.voxels,
+            per_voxel,
+            views,
+            root / "voxel_views.png",
+            "Views per voxel (captured images)",
+            tank=tank,
+        )
+
+    events = read_events(root) if (root / EVENTS).is_file() else []
+    figure, axis = plt.subplots(figsize=(8, 3))
+    marks = {"discovered": ("o", "found"), "flying": ("^", "allocated / flying"), "done": ("s", "done")}
+    for kind, (marker, label) in marks.items():
+        for k, name in enumerate(robots):
+            times = [e["t"] for e in events if e["kind"] == kind and e.get("robot") == name]
+            axis.scatter(
+                times,
+                [k] * len(times),
+                marker=marker,
+                color=colour_of[name],
+                label=f"{label}" if k == 0 else None,
+            )
+    for event in events:
+        if event["kind"] == "fail":
+            axis.axvline(event["t"], color="red", lw=1)
+    axis.set_yticks(range(len(robots)), robots)
+    axis.set_xlabel("simulated time (s)")
+    axis.set_title("Tasks found, allocated and done per robot (red line: a failure)")
+    axis.legend(fontsize=7)
+    figure.tight_layout()
+    figure.savefig(root / "timeline.png", dpi=110)
+    plt.close(figure)
+
+
+def _trajectory_rows(root: Path) -> np.ndarray:
+    """trajectories.csv as rows (robot index, time, true xyz, estimated xyz, yaw)."""
+    path = root / TRAJECTORIES
+    if not path.is_file():
+        return np.zeros((0, 9))
+    names: dict[str, int] = {}
+    rows = []
+    for line in path.read_text().splitlines()[1:]:
+        parts = line.split(",")
+        if len(parts) != 9:
+            continue  # a line cut by a kill
+        index = names.setdefault(parts[1], len(names))
+        try:
+            rows.append([index, float(parts[0]), *map(float, parts[2:])])
+        except ValueError:
+            continue
+    return np.array(rows).reshape(-1, 9)
+
+
+def report_markdown(document: dict) -> str:
+    """``report.md``: the summary table and the plots."""
+    tasks = document.get("tasks", [])
+    done = sum(1 for t in tasks if t.get("completed"))
+    coverage = document.get("coverage", {}).get("occluded", {})
+    comms = document.get("comms", {})
+    lines = [
+        "# Map-TIDAL mission",
+        "",
+        summary_table(document),
+        "",
+        f"Tasks: {len(tasks)} found, {done} done. Coverage of the captured views (occlusion on): "
+        f"{coverage.get('pct_uninspected', float('nan')):.1f} % of the walls uninspected. Comms: "
+        f"{comms.get('messages', 0)} messages, {comms.get('bytes', 0)} bytes, {comms.get('lost', 0)} lost.",
+        "",
+        "![top view](top_view.png)",
+        "",
+        "![timeline](timeline.png)",
+        "",
+        "![histogram](histogram.png)",
+        "",
+        "![views per voxel](voxel_views.png)",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def summary_table(document: dict) -> str:
+    """The one-table summary printed at the end of a mission."""
+    tasks = document.get("tasks", [])
+    coverage = document.get("coverage", {}).get("occluded", {})
+    comms = document.get("comms", {})
+    rtf = document.get("realtime_factor")
+    rows = [
+        ("simulated time", f"{document.get('sim_time_s', 0):.1f} s"),
+        ("real-time factor", f"{rtf:.1f}x" if rtf else "n/a"),
+        ("finished", str(document.get("finished"))),
+        ("tasks found / done", f"{len(tasks)} / {sum(1 for t in tasks if t.get('completed'))}"),
+        ("allocation conflicts", str(document.get("allocation_conflicts", "n/a"))),
+        ("walls uninspected (occluded)", f"{coverage.get('pct_uninspected', float('nan')):.1f} %"),
+        (
+            "messages / bytes / lost",
+            f"{comms.get('messages', 0)} / {comms.get('bytes', 0)} / {comms.get('lost', 0)}",
+        ),
+    ]
+    return "\n".join(["| figure | value |", "|---|---|", *(f"| {a} | {b} |" for a, b in rows)])
+
+
+def rebuild(root, tank) -> dict:
+    """Make ``mission.json``, the plots and ``report.md`` again from the event log (and the last snapshot,
+    for the comms counters and timing), as after a mission killed midway."""
+    root = Path(root)
+    if not (root / EVENTS).is_file():
+        raise ValueError(f"{root}: no {EVENTS}; is this a mission folder?")
+    events = read_events(root)
+    snapshot = {}
+    if (root / "mission.json").is_file():
+        try:
+            snapshot = json.loads((root / "mission.json").read_text())
+        except json.JSONDecodeError:
+            snapshot = {}
+    tasks: dict[int, dict] = {}
+    views = []
+    robots: dict[str, str] = {}
+    for event in events:
+        kind = event["kind"]
+        if kind == "start":
+            robots = dict.fromkeys(event.get("robots", []), "unknown")
+        elif kind == "discovered":
+            tasks[event["task"]] = {
+                "id": event["task"],
+                "position": event["position"],
+                "direction": event.get("direction", [1.0, 0.0, 0.0]),
+                "found_by": event["robot"],
+                "found_at_s": event["t"],
+                "assigned_to": None,
+                "completed": False,
+                "completion_time": None,
+                "image": None,
+            }
+        elif kind == "flying" and event["task"] in tasks:
+            tasks[event["task"]]["assigned_to"] = event["robot"]
+        elif kind == "done" and event["task"] in tasks:
+            tasks[event["task"]].update(
+                completed=True,
+                completion_time=event["t"],
+                image=event.get("image"),
+                assigned_to=event["robot"],
+            )
+            if "view" in event:
+                views.append(event["view"])
+        elif kind == "fail":
+            robots[event["robot"]] = "failed"
+    document = {
+        **snapshot,
+        "rebuilt_from_events": True,
+        "finished": any(e["kind"] == "end" and e.get("finished") for e in events),
+        "sim_time_s": max((e["t"] for e in events), default=0.0),
+        "robots": snapshot.get("robots", robots),
+        "tasks": sorted(tasks.values(), key=lambda t: t["id"]),
+    }
+    views_array = np.array(views).reshape(-1, 6)
+    document["coverage"] = coverage_of(views_array, tank)
+    atomic_write_json(root / "mission.json", document)
+    write_plots(root, document, views_array, tank)
+    atomic_write_text(root / "report.md", report_markdown(document))
+    return document

@@ -1,0 +1,478 @@
+"""The closed-loop Map-TIDAL mission (issue [mission]; the paper's Fig. 2 in our world): robots see, map,
+discover tasks, auction them over the acoustic channel, fly to them and inspect them.
+
+Every control period (the scenario's, 50 Hz) each live robot's go-to-pose controller flies its current
+activity on its own dead-reckoned state, and the physics steps. Every ``1 / frame_rate_hz`` seconds each
+robot renders its stereo pair and its front end (:mod:`maptidal.perception.frontend`) tracks, fuses and,
+at a keyframe, meshes; discovery (:func:`maptidal.discovery.discover`) runs on the mesh with every task
+the robot knows as existing tasks, and each new task it can reach is minted into its CBBA agent. The
+agents (:class:`maptidal.allocation.auction.AuctionSimulation`) exchange only their binary messages over
+the acoustic channel, in TDMA slots, in step with the physics. A robot explores first (a yaw sweep where
+it starts), then flies the first task on its CBBA path, holds it for ``dwell_s`` within the controller's
+tolerances, captures an image and marks the task done, which spreads over the channel too.
+
+The mission ends when every robot has explored and every reachable task is done, or at ``duration_s``.
+Scripted events: a robot failing (it stops and falls silent; CBBA releases its tasks after the agents'
+failure timeout) and a current. Outputs go to the output folder as the mission runs
+(:mod:`maptidal.mission.outputs`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from controllers.estimation import rotation_from_rpy
+from controllers.pose import PoseController
+from controllers.trajectory import MotionLimits, PoseTrajectory
+from envs.scenario import Scenario, inside_tank, load_scenario
+from envs.simulation import Simulation
+from envs.world import camera_offsets
+from maptidal.allocation.agent import AgentParams
+from maptidal.allocation.auction import AuctionSimulation
+from maptidal.allocation.messages import DONE
+from maptidal.allocation.scoring import AuctionParams, RobotProfile
+from maptidal.camera import StereoCameraParams
+from maptidal.comms.channel import ChannelParams
+from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
+from maptidal.free_space import free_space_mask
+from maptidal.mission.capture import camera_pose_from_body
+from maptidal.mission.outputs import MissionWriter
+from maptidal.perception.frontend import POSE_SOURCES, FrontEnd, FrontEndParams
+from maptidal.perception.keyframing import KeyframeParams
+from maptidal.perception.odometry import OdometryParams
+from maptidal.perception.recording import CameraIntrinsics, rotation_from_quaternion
+
+EVENT_KINDS = ("fail", "current")
+REACH_MARGIN_M = (
+    0.35  # a task closer than this to a wall, the floor or the surface is out of the robot's reach
+)
+
+
+@dataclass(frozen=True)
+class MissionEvent:
+    """A scripted event: ``fail`` (``robot`` stops at ``time_s``) or ``current`` (the water's current
+    becomes ``current`` m/s from ``time_s``)."""
+
+    time_s: float
+    kind: str
+    robot: str = ""
+    current: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if self.kind not in EVENT_KINDS:
+            raise ValueError(f"unknown mission event {self.kind!r}; known: {', '.join(EVENT_KINDS)}")
+        if not (math.isfinite(self.time_s) and self.time_s >= 0):
+            raise ValueError(f"a mission event's time must be finite and >= 0, got {self.time_s!r}")
+
+
+@dataclass(frozen=True)
+class MissionParams:
+    """How the mission runs (module docstring). Images are rendered at ``image_size`` (width, height) with
+    the OAK-D's field of view, smaller than the front end's default to keep the mission fast."""
+
+    duration_s: float = 240.0
+    frame_rate_hz: float = 1.0
+    image_size: tuple[int, int] = (320, 200)
+    pose_source: str = "vo"
+    explore_yaw_deg: float = 60.0
+    yaw_rate_deg_s: float = 12.0
+    speed_m_s: float = 0.25
+    dwell_s: float = 1.0
+    task_timeout_s: float = 60.0
+    position_tolerance_m: float = 0.15
+    yaw_tolerance_deg: float = 10.0
+    snapshot_every_s: float = 10.0
+    channel: ChannelParams = field(default_factory=ChannelParams)
+    agent: AgentParams = field(default_factory=lambda: AgentParams(failure_timeout_s=40.0, heartbeat_s=10.0))
+    discovery: DiscoveryParams = field(default_factory=DiscoveryParams)
+    # a keyframe per 25 cm or 20 deg (at most one a second): discovery on every 8 cm of a slow rise, as on
+    # the paper's protocol, would flood a 500 bit/s channel with tasks
+    keyframes: KeyframeParams = field(
+        default_factory=lambda: KeyframeParams(
+            min_interval_s=1.0, min_translation_m=0.25, min_rotation_deg=20.0
+        )
+    )
+    events: tuple[MissionEvent, ...] = ()
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise ValueError(f"duration must be positive, got {self.duration_s!r}")
+        if self.pose_source not in POSE_SOURCES:
+            raise ValueError(f"pose source must be one of {POSE_SOURCES}, got {self.pose_source!r}")
+        if not (self.frame_rate_hz > 0 and self.dwell_s >= 0 and self.task_timeout_s > 0):
+            raise ValueError("frame_rate_hz and task_timeout_s must be positive, dwell_s >= 0")
+
+
+@dataclass
+class _Robot:
+    """One robot's mission state."""
+
+    name: str
+    index: int
+    front: FrontEnd
+    controller: PoseController
+    left_offset: np.ndarray
+    centre: np.ndarray
+    activity: str = "explore"  # explore, fly, hold, idle, failed
+    legs: list = field(default_factory=list)
+    leg_start_s: float = 0.0
+    task_key: int | None = None
+    task_started_s: float = 0.0
+    within_since_s: float | None = None
+    explored: bool = False
+    skipped: set = field(default_factory=set)
+    xy_correction: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+
+class Mission:
+    """A closed-loop mission in a scenario (module docstring); :meth:`run` flies it."""
+
+    def __init__(self, scenario: Scenario | str | None, params: MissionParams, out_dir) -> None:
+        self.params = params
+        self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        names = [r.name for r in self.scenario.robots]
+        for event in params.events:
+            if event.kind == "fail" and event.robot not in names:
+                raise ValueError(f"a fail event names {event.robot!r}; the robots are {', '.join(names)}")
+        width, height = params.image_size
+        self.sim = Simulation(
+            self.scenario, camera=StereoCameraParams(width=width, height=height), flight_mode="stabilize"
+        )
+        self.sim.reset(seed=params.seed)
+        k = np.array(self.sim.intrinsics()["K"])
+        self.intrinsics = CameraIntrinsics(
+            width,
+            height,
+            float(k[0, 0]),
+            float(k[1, 1]),
+            float(k[0, 2]),
+            float(k[1, 2]),
+            self.sim.camera.baseline_m,
+        )
+        self.robots: dict[str, _Robot] = {}
+        profiles = []
+        for index, spec in enumerate(self.scenario.robots):
+            truth = self.sim.ground_truth(spec.name)
+            profiles.append(
+                RobotProfile(spec.name, index, np.asarray(truth["position"]), speed=params.speed_m_s)
+            )
+            self.robots[spec.name] = _Robot(
+                spec.name,
+                index,
+                FrontEnd(
+                    self.intrinsics,
+                    params.pose_source,
+                    FrontEndParams(
+                        keyframes=params.keyframes, odometry=OdometryParams(has_dvl="dvl" in spec.sensors)
+                    ),
+                ),
+                PoseController(spec.vehicle.controller_model(), hold_roll_pitch=False),
+                camera_offsets(spec.vehicle, self.sim.camera)["left"],
+                np.asarray(spec.vehicle.sensors.camera_position, float),
+            )
+        self.auction = AuctionSimulation(profiles, [], params.channel, AuctionParams(), params.agent)
+        self.writer = MissionWriter(out_dir)
+        self.tasks: dict[int, dict] = {}  # key -> record (the mission's own ledger, for the outputs)
+        self.timing = dict.fromkeys(
+            ("physics", "rendering", "perception", "discovery", "allocation", "control"), 0.0
+        )
+        self.captured: list[np.ndarray] = []  # the true camera viewpoints where images were captured
+
+    # ----- helpers ------------------------------------------------------------------------------
+    def _limits(self) -> MotionLimits:
+        rate = math.radians(self.params.yaw_rate_deg_s)
+        return MotionLimits(
+            max_speed=self.params.speed_m_s, max_accel=0.1, max_yaw_rate=rate, max_yaw_accel=rate
+        )
+
+    def _start_exploring(self, robot: _Robot, now: float) -> None:
+        estimate = self._estimate(robot)
+        here, yaw = estimate.position.copy(), estimate.yaw
+        sweep = math.radians(self.params.explore_yaw_deg)
+        limits = self._limits()
+        robot.legs = [
+            PoseTrajectory(here, yaw, here, yaw + sweep, limits),
+            PoseTrajectory(here, yaw + sweep, here, yaw - sweep, limits),
+            PoseTrajectory(here, yaw - sweep, here, yaw, limits),
+        ]
+        robot.leg_start_s = now
+
+    def _reference(self, robot: _Robot, now: float):
+        while robot.legs and now - robot.leg_start_s > robot.legs[0].duration:
+            if len(robot.legs) == 1:
+                break
+            robot.leg_start_s += robot.legs[0].duration
+            robot.legs.pop(0)
+        return robot.legs[0].at(now - robot.leg_start_s)
+
+    def _estimate(self, robot: _Robot):
+        """What the robot flies on: its dead reckoning, with the horizontal position corrected by its visual
+        odometry when the pose source is ``vo`` (the offset is refreshed at every frame; between frames the
+        dead reckoning carries it). The SLAM stand-in: without it a robot with no DVL flies blind."""
+        estimate = self.sim.estimate(robot.name)
+        if not robot.xy_correction.any():
+            return estimate
+        corrected = dataclasses.replace(estimate, position=estimate.position.copy())
+        corrected.position[:2] += robot.xy_correction
+        return corrected
+
+    def _camera_pose(self, robot: _Robot, source: str):
+        if source == "truth":
+            truth = self.sim.ground_truth(robot.name)
+            return camera_pose_from_body(
+                truth["position"], rotation_from_quaternion(truth["quaternion"]), robot.left_offset
+            )
+        estimate = self.sim.estimate(robot.name)  # the raw dead reckoning: the front end corrects it itself
+        return camera_pose_from_body(estimate.position, rotation_from_rpy(*estimate.rpy), robot.left_offset)
+
+    def _reachable(self, rows: np.ndarray) -> np.ndarray:
+        tank = self.scenario.tank
+        keep = free_space_mask(tank, rows, self.params.discovery.standoff) if len(rows) else np.zeros(0, bool)
+        inside = np.array([inside_tank(tank, row[:3], REACH_MARGIN_M) for row in rows], bool)
+        return keep & inside
+
+    # ----- the loop -------------------------------------------------------------------------------
+    def run(self, progress: Callable[[float, int, int, float], None] | None = None) -> dict:
+        """Fly the mission; returns the final ``mission.json`` document."""
+        p = self.params
+        period = self.scenario.control_period_s
+        frame_every = 1.0 / p.frame_rate_hz
+        next_frame, next_snapshot = 0.0, p.snapshot_every_s
+        events = sorted(p.events, key=lambda e: e.time_s)
+        wall_start = time.perf_counter()
+        for robot in self.robots.values():
+            self._start_exploring(robot, 0.0)
+        self.writer.event(0.0, "start", robots=list(self.robots), pose_source=p.pose_source)
+        now = 0.0
+        finished = False
+        while now < p.duration_s - 1e-9:
+            while events and events[0].time_s <= now:
+                self._apply(events.pop(0), now)
+            start = time.perf_counter()
+            commands = {}
+            for robot in self.robots.values():
+                if robot.activity != "failed":
+                    commands[robot.name] = robot.controller.update(
+                        self._estimate(robot), self._reference(robot, now), period
+                    )
+            self.timing["control"] += time.perf_counter() - start
+            start = time.perf_counter()
+            self.sim.step(commands)
+            self.timing["physics"] += time.perf_counter() - start
+            now = self.sim.time
+            for robot in self.robots.values():
+                if robot.activity != "failed":
+                    self._advance_activity(robot, now)
+            start = time.perf_counter()
+            for robot in self.robots.values():
+                agent = self.auction.agents[robot.index]
+                if robot.activity != "failed":
+                    agent.set_position(self._estimate(robot).position)
+            self.auction.advance_to(now)
+            self.timing["allocation"] += time.perf_counter() - start
+            if now >= next_frame - 1e-9:
+                next_frame += frame_every
+                for robot in self.robots.values():
+                    if robot.activity != "failed":
+                        self._see(robot, now)
+                self.writer.trajectory(now, {r.name: self._poses(r) for r in self.robots.values()})
+            if now >= next_snapshot:
+                next_snapshot += p.snapshot_every_s
+                self.writer.snapshot(self.document(now, time.perf_counter() - wall_start, finished=False))
+            if progress is not None:
+                done = sum(1 for t in self.tasks.values() if t["completed"])
+                progress(now, len(self.tasks), done, p.duration_s)
+            if self._finished():
+                finished = True
+                break
+        self.writer.event(now, "end", finished=finished)
+        document = self.document(now, time.perf_counter() - wall_start, finished=finished)
+        self.writer.finish(document, self.captured_views(), self.scenario.tank)
+        self.sim.close()
+        return document
+
+    def _poses(self, robot: _Robot) -> dict:
+        truth = self.sim.ground_truth(robot.name)
+        estimate = self._estimate(robot)
+        return {"truth": truth["position"], "estimate": estimate.position.tolist(), "yaw": truth["rpy"][2]}
+
+    def _apply(self, event: MissionEvent, now: float) -> None:
+        if event.kind == "fail":
+            robot = self.robots[event.robot]
+            robot.activity = "failed"
+            self.auction.agents[robot.index].alive = False
+            self.writer.event(now, "fail", robot=robot.name)
+        elif event.kind == "current":
+            self.sim.set_current(event.current)
+            self.writer.event(now, "current", current=list(event.current))
+
+    def _see(self, robot: _Robot, now: float) -> None:
+        start = time.perf_counter()
+        left, right = self.sim.render_stereo(robot.name)
+        self.timing["rendering"] += time.perf_counter() - start
+        start = time.perf_counter()
+        base = "truth" if self.params.pose_source == "truth" else "dr"
+        record, keyframe = robot.front.process(0, now, left, right, self._camera_pose(robot, base))
+        if self.params.pose_source == "vo":
+            # the visual pose of the camera, back to the body: the horizontal offset to fly on
+            dr = self._camera_pose(robot, "dr")
+            robot.xy_correction = (record.pose.position - dr.position)[:2]
+        self.timing["perception"] += time.perf_counter() - start
+        if keyframe is None or len(keyframe.keyframe.mesh.faces) == 0:
+            return
+        start = time.perf_counter()
+        agent = self.auction.agents[robot.index]
+        existing = np.array([np.r_[t.position, t.direction] for t in agent.tasks]).reshape(-1, 6)
+        mesh = keyframe.keyframe.mesh
+        try:
+            new = discover(mesh.vertices, mesh.faces, existing=existing, params=self.params.discovery).final
+        except DiscoveryInputError:
+            new = np.zeros((0, 6))
+        reachable = self._reachable(new)
+        for row, ok in zip(new, reachable, strict=True):
+            if not ok:
+                continue
+            task = agent.discover_task(row[:3], row[3:], now_s=now)
+            self.tasks[task.key] = {
+                "id": task.key,
+                "position": task.position.tolist(),
+                "direction": task.direction.tolist(),
+                "found_by": robot.name,
+                "found_at_s": round(now, 3),
+                "assigned_to": None,
+                "completed": False,
+                "completion_time": None,
+                "image": None,
+            }
+            self.writer.event(
+                now,
+                "discovered",
+                robot=robot.name,
+                task=task.key,
+                position=task.position.tolist(),
+                direction=task.direction.tolist(),
+            )
+        self.writer.event(
+            now,
+            "keyframe",
+            robot=robot.name,
+            faces=len(mesh.faces),
+            new_tasks=len(new),
+            reachable=int(reachable.sum()),
+        )
+        self.timing["discovery"] += time.perf_counter() - start
+
+    def _advance_activity(self, robot: _Robot, now: float) -> None:
+        agent = self.auction.agents[robot.index]
+        if robot.activity == "explore":
+            if now - robot.leg_start_s >= sum(leg.duration for leg in robot.legs):
+                robot.explored = True
+                robot.activity = "idle"
+                self.writer.event(now, "explored", robot=robot.name)
+            return
+        if robot.activity == "idle":
+            path = [k for k in agent.path_keys() if k not in robot.skipped and self._open(agent, k)]
+            if not path:
+                return
+            key = path[0]
+            task = next(t for t in agent.tasks if t.key == key)
+            estimate = self._estimate(robot)
+            yaw = math.atan2(task.direction[1], task.direction[0])
+            goal = task.position - rotation_from_rpy(0.0, 0.0, yaw) @ robot.centre
+            robot.legs = [PoseTrajectory(estimate.position.copy(), estimate.yaw, goal, yaw, self._limits())]
+            robot.leg_start_s, robot.task_started_s, robot.task_key = now, now, key
+            robot.within_since_s = None
+            robot.activity = "fly"
+            self.tasks.get(key, {})["assigned_to"] = robot.name
+            self.writer.event(now, "flying", robot=robot.name, task=key)
+            return
+        if robot.activity == "fly":
+            key = robot.task_key
+            if not self._open(agent, key) or key not in agent.path_keys():
+                robot.activity = "idle"  # done by another robot, or re-allocated
+                self.writer.event(now, "released", robot=robot.name, task=key)
+                return
+            leg = robot.legs[0]
+            estimate = self._estimate(robot)
+            close = np.linalg.norm(estimate.position - leg.goal) <= self.params.position_tolerance_m
+            aligned = abs(
+                math.remainder(leg.start_yaw + leg.turn - estimate.yaw, 2 * math.pi)
+            ) <= math.radians(self.params.yaw_tolerance_deg)
+            arrived = now - robot.leg_start_s >= leg.duration
+            if arrived and close and aligned:
+                robot.within_since_s = robot.within_since_s if robot.within_since_s is not None else now
+                if now - robot.within_since_s >= self.params.dwell_s:
+                    self._capture(robot, key, now)
+            else:
+                robot.within_since_s = None
+            if now - robot.task_started_s > self.params.task_timeout_s:
+                robot.skipped.add(key)
+                robot.activity = "idle"
+                self.writer.event(now, "timeout", robot=robot.name, task=key)
+
+    def _open(self, agent, key: int) -> bool:
+        slots = agent.slots_of(np.array([key]))
+        return bool(slots[0] >= 0 and agent.z[slots[0]] != DONE)
+
+    def _capture(self, robot: _Robot, key: int, now: float) -> None:
+        left, _ = self.sim.render_stereo(robot.name)
+        image = self.writer.image(f"task_{key}_{robot.name}.png", left)
+        truth = self._camera_pose(robot, "truth")
+        self.captured.append(np.r_[truth.position, truth.forward])
+        self.auction.agents[robot.index].mark_done(key, now)
+        record = self.tasks.setdefault(key, {"id": key})
+        record.update(completed=True, completion_time=round(now, 3), image=image, assigned_to=robot.name)
+        view = np.r_[truth.position, truth.forward]
+        self.writer.event(now, "done", robot=robot.name, task=key, image=image, view=view.tolist())
+        robot.activity = "idle"
+
+    def _finished(self) -> bool:
+        alive = [r for r in self.robots.values() if r.activity != "failed"]
+        if not alive or not all(r.explored for r in alive):
+            return False
+        views = [self.auction.agents[r.index] for r in alive]
+        known = {t.key for a in views for t in a.tasks}
+        done = {k for a in views for k, w in a.winners().items() if w == DONE}
+        skipped = set().union(*(r.skipped for r in alive))
+        return bool(known) and known <= done | skipped
+
+    def captured_views(self) -> np.ndarray:
+        """The true camera viewpoints ``(N, 6)`` where task images were captured."""
+        return np.array(self.captured).reshape(-1, 6)
+
+    def document(self, now: float, wall_s: float, finished: bool) -> dict:
+        """The ``mission.json`` document as of now."""
+        stats = self.auction.channel.stats
+        conflicts = 0
+        alive = [a for a in self.auction.agents.values() if a.alive]
+        held: dict[int, int] = {}
+        for agent in alive:
+            for slot in agent.bundle:
+                held[agent.tasks[slot].key] = held.get(agent.tasks[slot].key, 0) + 1
+        conflicts = sum(1 for count in held.values() if count > 1)
+        return {
+            "finished": finished,
+            "realtime_factor": now / wall_s if wall_s > 0 else None,
+            "sim_time_s": now,
+            "wall_time_s": wall_s,
+            "robots": {r.name: r.activity for r in self.robots.values()},
+            "comms": {
+                "messages": stats.transmissions,
+                "bytes": stats.bytes,
+                "delivered": stats.delivered,
+                "lost": stats.lost,
+                "out_of_range": stats.out_of_range,
+                "link_down": stats.link_down,
+                "half_duplex": stats.half_duplex,
+            },
+            "allocation_conflicts": conflicts,
+            "tasks": sorted(self.tasks.values(), key=lambda t: t["id"]),
+            "timing": dict(self.timing),
+        }
