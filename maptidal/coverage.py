@@ -38,7 +38,7 @@ import trimesh
 from scipy.stats import gamma
 
 from maptidal.camera import OAKD_HFOV_DEG, OAKD_VFOV_DEG
-from maptidal.geometry import CameraModel, frustum_masks
+from maptidal.geometry import CameraModel, _inside_local, frustum_masks, view_frame
 from maptidal.raycast import Occluders, visible_from
 from maptidal.tank import TankModel
 
@@ -229,19 +229,59 @@ class CoverageModel:
     def _prepared_occluders(self) -> Occluders | None:
         return None if self.occluders is None else Occluders.of(self.occluders)
 
-    def views(self, viewpoints: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
-        """Views per voxel for viewpoint rows ``(N, 6)``.
-
-        With ``among`` (voxel indices), only those voxels are counted, and the result has one entry per
-        index: an incremental count that casts no rays to voxels already settled.
-        """
+    def views(self, viewpoints: np.ndarray) -> np.ndarray:
+        """Views per voxel for viewpoint rows ``(N, 6)``."""
         # A voxel centre lies up to half a diagonal off its surface; allow that much.
         tolerance = float(np.sqrt(3.0) * self.params.voxel_m)
-        points = self.voxels if among is None else self.voxels[among]
-        return views_per_point(viewpoints, points, self.params.camera, self._prepared_occluders, tolerance)
+        return views_per_point(
+            viewpoints, self.voxels, self.params.camera, self._prepared_occluders, tolerance
+        )
 
     def evaluate(self, viewpoints: np.ndarray) -> tuple[CoverageReport, np.ndarray]:
         """The report and the views per voxel for viewpoint rows ``(N, 6)``."""
         viewpoints = np.asarray(viewpoints, float).reshape(-1, 6)
         views = self.views(viewpoints)
         return coverage_report(views, len(viewpoints), self.params.occlusion), views
+
+
+class SeenVoxels:
+    """Which voxels of a :class:`CoverageModel` any viewpoint has seen so far, counted incrementally: each
+    new viewpoint is tested (frustum, then occlusion) only against the voxels not seen yet, kept as a
+    compact array, so a camera looking at what it has seen casts no rays and copies nothing. The result
+    equals ``model.views(all viewpoints so far) > 0`` (tests/test_gym.py checks it on a flown
+    trajectory)."""
+
+    def __init__(self, model: CoverageModel) -> None:
+        self.model = model
+        self._columns = np.ascontiguousarray(model.voxels.T)
+        self._tolerance = float(np.sqrt(3.0) * model.params.voxel_m)
+        self.reset()
+
+    def reset(self) -> None:
+        """Nothing seen."""
+        self.seen = np.zeros(len(self.model.voxels), bool)
+        self._unseen = np.arange(len(self.model.voxels))
+        self._unseen_columns = self._columns.copy()
+
+    def look(self, viewpoints: np.ndarray) -> int:
+        """Add what the viewpoints ``(N, 6)`` see; returns the number of voxels newly seen."""
+        camera = self.model.params.camera
+        newly = 0
+        for viewpoint in np.asarray(viewpoints, float).reshape(-1, 6):
+            if not len(self._unseen):
+                break
+            local = view_frame(viewpoint) @ (self._unseen_columns - viewpoint[:3, None])
+            inside = np.flatnonzero(_inside_local(local[0], local[1], local[2], camera))
+            if len(inside) and self.model.occluders is not None:
+                points = self._unseen_columns[:, inside].T
+                inside = inside[
+                    visible_from(viewpoint, points, self.model._prepared_occluders, self._tolerance)
+                ]
+            if len(inside):
+                self.seen[self._unseen[inside]] = True
+                keep = np.ones(len(self._unseen), bool)
+                keep[inside] = False
+                self._unseen = self._unseen[keep]
+                self._unseen_columns = np.ascontiguousarray(self._unseen_columns[:, keep])
+                newly += len(inside)
+        return newly

@@ -7,6 +7,7 @@ needs no optional dependency (trimesh's fast path wants embree).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,7 +56,7 @@ def first_hit_distances(
     return hits
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Occluders:
     """A triangle soup prepared for rays from one origin at a time (:meth:`first_hits_from`).
 
@@ -98,16 +99,17 @@ class Occluders:
         """:func:`first_hit_distances` for rays from one ``origin`` ``(3,)``."""
         directions = np.asarray(directions, float).reshape(-1, 3)
         hits = np.full(len(directions), np.inf)
-        if len(directions) == 0 or len(self.triangles) == 0:
+        n_triangles = len(self.triangles)
+        if len(directions) == 0 or n_triangles == 0:
             return hits
         o = np.asarray(origin, float).reshape(3)
-        # a x o for rows a is a @ skew: the cross products with the origin as one 3 x 3 product each
+        # a x o for rows a is a @ skew: the cross products with the origin in one 3 x 3 product
         skew = np.array([[0.0, -o[2], o[1]], [o[2], 0.0, -o[0]], [-o[1], o[0], 0.0]])
-        u_basis = self.edge2 @ skew - self.e2_x_v0
-        v_basis = -(self.edge1 @ skew) - self.v0_x_e1
+        crossed = self._edges @ skew  # (e2 x o; e1 x o)
+        basis = self._basis  # reused between calls (one caller at a time: not for threads)
+        basis[:, n_triangles : 2 * n_triangles] = (crossed[:n_triangles] - self.e2_x_v0).T
+        basis[:, 2 * n_triangles :] = (-crossed[n_triangles:] - self.v0_x_e1).T
         t_numerator = -(self.normal @ o) - self.t_offset
-        basis = np.concatenate([self.normal, u_basis, v_basis]).T
-        n_triangles = len(self.triangles)
         step = max(1, _CHUNK_PAIRS // n_triangles)
         for start in range(0, len(directions), step):
             products = directions[start : start + step] @ basis
@@ -116,10 +118,21 @@ class Occluders:
             inv = 1.0 / np.where(parallel, 1.0, det)
             u = products[:, n_triangles : 2 * n_triangles] * inv
             v = products[:, 2 * n_triangles :] * inv
-            t = t_numerator[None, :] * inv
-            valid = ~parallel & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > epsilon)
+            t = t_numerator * inv
+            valid = (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > epsilon) & ~parallel
             hits[start : start + step] = np.where(valid, t, np.inf).min(axis=1)
         return hits
+
+    @functools.cached_property
+    def _edges(self) -> np.ndarray:
+        return np.vstack([self.edge2, self.edge1])
+
+    @functools.cached_property
+    def _basis(self) -> np.ndarray:
+        # (3, 3T): the det columns (e2 x e1) fixed; the u and v columns filled per origin
+        basis = np.zeros((3, 3 * len(self.triangles)))
+        basis[:, : len(self.triangles)] = self.normal.T
+        return basis
 
 
 def first_hit_distances_from(

@@ -16,6 +16,7 @@ from maptidal.geometry import (
     frustum_count_bounds,
     in_frustum,
     point_triangle_distances,
+    view_frame,
 )
 
 
@@ -144,3 +145,16 @@ def test_point_triangle_distance_agrees_with_dense_sampling(seed):
         sampled = np.linalg.norm(samples - point, axis=1).min()
         assert distance <= sampled + 1e-12
         assert sampled - distance <= spacing
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1))
+def test_the_single_view_frame_equals_the_batched_camera_axes(x, y, z):
+    direction = np.array([x, y, z])
+    if np.linalg.norm(direction) < 1e-3:
+        return
+    direction /= np.linalg.norm(direction)
+    right, up = camera_axes(direction[None])
+    np.testing.assert_allclose(
+        view_frame(np.r_[0.0, 0.0, 0.0, direction]), np.vstack([direction, right, up]), atol=1e-12
+    )

@@ -9,7 +9,7 @@ import numpy as np
 from gymnasium import spaces
 
 from envs.gym.core import SAFE_BOX, MapTidalEnv
-from maptidal.coverage import CoverageModel, CoverageParams
+from maptidal.coverage import CoverageModel, CoverageParams, SeenVoxels
 
 SECTORS = 8  # coverage summary: the evaluated walls in eight sectors around the tank's centre line
 REWARD_PER_VOXEL = 0.01
@@ -37,19 +37,20 @@ class WallCoverage:
         edges = np.linspace(bearings.min(), bearings.max() + 1e-9, SECTORS + 1)
         self._sector = np.clip(np.searchsorted(edges, bearings, side="right") - 1, 0, SECTORS - 1)
         self._sector_size = np.maximum(np.bincount(self._sector, minlength=SECTORS), 1)
-        self.seen = np.zeros(len(self.model.voxels), bool)
+        self._tracker = SeenVoxels(self.model)  # rays only to voxels not yet seen
+
+    @property
+    def seen(self) -> np.ndarray:
+        """Which wall voxels have been seen."""
+        return self._tracker.seen
 
     def reset(self) -> None:
         """Nothing seen."""
-        self.seen[:] = False
+        self._tracker.reset()
 
     def look(self, viewpoints: np.ndarray) -> int:
         """Count what the viewpoints ``(N, 6)`` see; the number of voxels newly seen."""
-        # rays go only to voxels not yet seen: a robot looking at what it has seen casts none
-        unseen = np.flatnonzero(~self.seen)
-        new = unseen[self.model.views(viewpoints, among=unseen) > 0]
-        self.seen[new] = True
-        return len(new)
+        return self._tracker.look(viewpoints)
 
     def summary(self) -> np.ndarray:
         """``(1 + SECTORS,)``: the share seen overall, then per sector."""
