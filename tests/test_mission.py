@@ -169,3 +169,36 @@ def test_a_robot_outside_the_tank_is_refused(tmp_path):
     )
     assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_a_failed_robots_tasks_pass_to_the_survivor(tmp_path):
+    """rov1 fails at 40 s. Once the others have not heard from it for the agents' failure timeout (40 s),
+    CBBA releases its tasks and the survivor takes them: at the end no task is still rov1's in the
+    survivor's view, and every task rov1 held when it failed (and had shared) is the survivor's or done. (Both robots carry
+    a DVL here, so that the survivor can fly what it takes.)"""
+    import dataclasses
+
+    from maptidal.allocation.messages import DONE
+    from maptidal.mission.run import MissionEvent
+
+    scenario, _ = load_mission(None)
+    with_dvl = tuple(
+        dataclasses.replace(r, sensors=tuple(dict.fromkeys((*r.sensors, "dvl")))) for r in scenario.robots
+    )
+    scenario = dataclasses.replace(scenario, robots=with_dvl)
+    params = MissionParams(duration_s=110.0, seed=1, events=(MissionEvent(40.0, "fail", "rov1"),))
+    mission = Mission(scenario, params, tmp_path)
+    document = mission.run()
+    survivor, failed = mission.auction.agents[0], mission.auction.agents[1]
+    winners = survivor.winners()
+    # a task rov1 found and failed before telling anyone is lost with it; the others it held must pass on
+    held_at_failure = [failed.tasks[j].key for j in failed.bundle if failed.tasks[j].key in winners]
+    assert held_at_failure, "rov1 held no shared task when it failed: the test shows nothing"
+    assert 1 in survivor.failed
+    assert all(winners[key] in (0, DONE) for key in held_at_failure), {k: winners[k] for k in held_at_failure}
+    assert all(w != 1 for w in winners.values())
+    assert document["robots"]["rov1"] == "failed"
+    assert not any(
+        t["assigned_to"] == "rov1" and t["completion_time"] and t["completion_time"] > 40.0
+        for t in document["tasks"]
+    )
