@@ -174,8 +174,8 @@ def test_a_robot_outside_the_tank_is_refused(tmp_path):
 def test_a_failed_robots_tasks_pass_to_the_survivor(tmp_path):
     """rov1 fails at 40 s. Once the others have not heard from it for the agents' failure timeout (40 s),
     CBBA releases its tasks and the survivor takes them: at the end no task is still rov1's in the
-    survivor's view, and every task rov1 held when it failed (and had shared) is the survivor's or done. (Both robots carry
-    a DVL here, so that the survivor can fly what it takes.)"""
+    survivor's view, and every task rov1 held when it failed (and had shared) is the survivor's or done.
+    (Both robots carry a DVL here, so that the survivor can fly what it takes.)"""
     import dataclasses
 
     from maptidal.allocation.messages import DONE
