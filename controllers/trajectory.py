@@ -121,3 +121,33 @@ def _stretched(profile: TrapezoidalProfile, duration: float) -> TrapezoidalProfi
     # a triangle/trapezoid's duration scales as 1/k when speed and acceleration scale as k and k^2
     k = profile.duration / duration
     return TrapezoidalProfile(profile.distance, profile.max_speed * k, profile.max_accel * k * k)
+
+
+@dataclass(frozen=True)
+class Hold:
+    """Stay at one pose (x, y, z, yaw) for ``duration`` seconds: a leg of a :class:`Route`."""
+
+    position: np.ndarray
+    yaw: float
+    duration: float
+
+    def at(self, t: float) -> PoseReference:
+        """The reference at any time: the pose, at rest."""
+        return PoseReference(np.asarray(self.position, float), np.zeros(3), np.zeros(3), self.yaw)
+
+
+class Route:
+    """Legs (:class:`PoseTrajectory` or :class:`Hold`) flown one after another; ``at(t)`` is the reference
+    ``t`` seconds from the start, and past the end the last leg's end, held."""
+
+    def __init__(self, legs: list) -> None:
+        if not legs:
+            raise ValueError("a route needs at least one leg")
+        self.legs = list(legs)
+        self.starts = np.cumsum([0.0, *(leg.duration for leg in self.legs[:-1])])
+        self.duration = float(self.starts[-1] + self.legs[-1].duration)
+
+    def at(self, t: float) -> PoseReference:
+        """The reference at time ``t`` since the route began."""
+        k = max(0, int(np.searchsorted(self.starts, t, side="right")) - 1)
+        return self.legs[k].at(t - self.starts[k])

@@ -210,16 +210,22 @@ def _robot_from(entry: dict, index: int, tank: TankModel) -> RobotSpec:
     return RobotSpec(name, vehicle, position, float(yaw), tuple(sensors))
 
 
-def load_scenario(path: str | Path | None = None) -> Scenario:
-    """Read a scenario TOML (default ``assets/scenarios/default.toml``; a bare name looks there)."""
-    path = Path(path) if path is not None else DEFAULT_SCENARIO
+def read_scenario_file(path: str | Path | None = None, default: Path = DEFAULT_SCENARIO) -> tuple[Path, dict]:
+    """Find and parse a scenario TOML (``default`` when ``path`` is None; a bare name looks in
+    assets/scenarios): its resolved path and document, or ScenarioError naming the file."""
+    path = Path(path) if path is not None else default
     if not path.exists() and (SCENARIO_DIR / f"{path}.toml").exists():
         path = SCENARIO_DIR / f"{path}.toml"
     _require(path.is_file(), f"scenario not found: {path}")
     try:
-        document = tomllib.loads(path.read_text())
+        return path, tomllib.loads(path.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise ScenarioError(f"{path}: not valid TOML ({err})") from None
+
+
+def load_scenario(path: str | Path | None = None) -> Scenario:
+    """Read a scenario TOML (default ``assets/scenarios/default.toml``; a bare name looks there)."""
+    path, document = read_scenario_file(path)
     try:
         return scenario_from_dict(document, path.parent)
     except ScenarioError as err:

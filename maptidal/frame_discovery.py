@@ -146,7 +146,6 @@ def write_outputs(
         if overlays:
             frame = next(f for f in recording.frames if f.index == output.frame_index)
             left, _ = recording.images(frame)
-            pose = result.run.frames[recording.frames.index(frame)].pose
             panel = keyframe_overlay(
                 left,
                 output.pixels,
@@ -155,7 +154,7 @@ def write_outputs(
                 mesh.faces,
                 new,
                 earlier,
-                pose,
+                output.pose,
                 recording.intrinsics,
                 stages,
             )

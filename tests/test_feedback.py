@@ -12,7 +12,14 @@ from controllers.flight_modes import ModeParams
 from controllers.pid import PID, PIDGains
 from controllers.pose import DepthHold, HeadingHold, PoseController, pole_placement_gains
 from controllers.task import TaskExecutor, TaskParams
-from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, TrapezoidalProfile
+from controllers.trajectory import (
+    Hold,
+    MotionLimits,
+    PoseReference,
+    PoseTrajectory,
+    Route,
+    TrapezoidalProfile,
+)
 from envs.scenario import RobotSpec, Scenario
 from envs.simulation import Simulation
 from envs.vehicle import load_vehicle
@@ -312,3 +319,20 @@ def test_position_control_is_ardusubs_cascade_with_its_defaults():
     # a target to the left (+y) is a lateral command to the left: negative (right is +)
     _, lateral = HorizontalPositionControl().update([0.0, 0.2], at_rest, 0.02)
     assert lateral == pytest.approx(-math.atan(20.2 / 980.665) / math.radians(45))
+
+
+def test_a_route_flies_its_legs_one_after_another_and_holds_the_end():
+    start, goal = np.zeros(3), np.array([1.0, 0.0, 0.0])
+    move = PoseTrajectory(start, 0.0, goal, 0.5)
+    route = Route([Hold(start, 0.0, 2.0), move, Hold(goal, 0.5, 1.0)])
+    assert route.duration == pytest.approx(3.0 + move.duration)
+    np.testing.assert_allclose(route.at(1.0).position, start)  # holding
+    halfway = route.at(2.0 + move.duration / 2)
+    np.testing.assert_allclose(halfway.position, move.at(move.duration / 2).position)
+    assert halfway.velocity[0] > 0
+    for t in (2.0 + move.duration + 0.5, route.duration + 10.0):  # the last hold, and past the end
+        end = route.at(t)
+        np.testing.assert_allclose(end.position, goal)
+        assert end.yaw == pytest.approx(0.5) and not end.velocity.any()
+    with pytest.raises(ValueError, match="at least one leg"):
+        Route([])

@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 
 import cv2
 import numpy as np
 import pytest
+from cli_helpers import assert_one_line_error, run_maptidal
 from scipy.spatial.transform import Rotation
 
 from maptidal.perception.keyframing import KeyframeParams, KeyframeSelector
@@ -114,24 +113,7 @@ def test_bad_recordings_give_one_line_and_status_2(tmp_path, how, message):
     root = tmp_path / "rec"
     _write(root)
     _break(root, how)
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "maptidal.cli",
-            "discover-frames",
-            str(root),
-            "--out",
-            str(tmp_path / "out"),
-            "--json",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert done.returncode == 2, done.stderr
-    lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and message in lines[0] and "Traceback" not in done.stderr
+    assert_one_line_error(run_maptidal("discover-frames", root, "--out", tmp_path / "out", "--json"), message)
 
 
 def test_a_missing_folder_and_bad_intrinsics_are_refused(tmp_path):

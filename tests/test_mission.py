@@ -12,6 +12,7 @@ import sys
 import time
 
 import pytest
+from cli_helpers import assert_one_line_error, run_maptidal
 
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import read_events
@@ -106,12 +107,7 @@ def test_a_killed_mission_leaves_a_log_the_report_rebuilds(tmp_path):
     finally:
         process.wait(timeout=30)
     assert process.returncode == -signal.SIGKILL
-    done = subprocess.run(
-        [sys.executable, "-m", "maptidal.cli", "report", str(tmp_path)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    done = run_maptidal("report", tmp_path)
     assert done.returncode == 0, done.stderr
     rebuilt = json.loads((tmp_path / "mission.json").read_text())
     assert rebuilt["rebuilt_from_events"] and not rebuilt["finished"]
@@ -135,24 +131,7 @@ def test_bad_mission_files_give_one_line_and_status_2(tmp_path, mission_table, m
     base = asset("scenarios", "mission.toml").read_text()
     path = tmp_path / "bad.toml"
     path.write_text(base + "\n" + mission_table)
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "maptidal.cli",
-            "run",
-            "--scenario",
-            str(path),
-            "--out",
-            str(tmp_path / "o"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert done.returncode == 2, done.stderr
-    lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and message in lines[0] and "Traceback" not in done.stderr
+    assert_one_line_error(run_maptidal("run", "--scenario", path, "--out", tmp_path / "o"), message)
 
 
 def test_a_robot_outside_the_tank_is_refused(tmp_path):
@@ -161,14 +140,7 @@ def test_a_robot_outside_the_tank_is_refused(tmp_path):
     text = asset("scenarios", "mission.toml").read_text().replace("[-1.6, 0.6, 1.0]", "[-1.6, 0.6, 9.0]")
     path = tmp_path / "outside.toml"
     path.write_text(text)
-    done = subprocess.run(
-        [sys.executable, "-m", "maptidal.cli", "run", "--scenario", str(path), "--out", str(tmp_path / "o")],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert done.returncode == 2 and len(done.stderr.strip().splitlines()) == 1, done.stderr
-    assert "Traceback" not in done.stderr
+    assert_one_line_error(run_maptidal("run", "--scenario", path, "--out", tmp_path / "o"))
 
 
 def test_a_failed_robots_tasks_pass_to_the_survivor(tmp_path):

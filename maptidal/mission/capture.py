@@ -29,7 +29,7 @@ import numpy as np
 
 from controllers.estimation import rotation_from_rpy
 from controllers.pose import PoseController
-from controllers.trajectory import MotionLimits, PoseTrajectory
+from controllers.trajectory import Hold, MotionLimits, PoseTrajectory, Route
 from envs.scenario import Scenario, load_scenario
 from envs.simulation import Simulation
 from envs.world import camera_offsets
@@ -177,35 +177,30 @@ def _fly(sim: Simulation, out_dir: Path, params: CaptureParams, seed: int, robot
         max_yaw_rate=math.radians(params.yaw_rate_deg_s),
         max_yaw_accel=math.radians(params.yaw_rate_deg_s),
     )
-    legs = [
-        PoseTrajectory(
-            body_target(start_position, start_yaw),
-            start_yaw,
-            body_target(start_position, start_yaw),
-            start_yaw,
-        )
-    ]
-    legs[0].duration = params.settle_s
-    for (a, yaw_a), (b, yaw_b) in itertools.pairwise(waypoints):
-        legs.append(PoseTrajectory(body_target(a, yaw_a), yaw_a, body_target(b, yaw_b), yaw_b, limits))
-    total = sum(leg.duration for leg in legs)
+    start = body_target(start_position, start_yaw)
+    route = Route(
+        [
+            Hold(start, start_yaw, params.settle_s),
+            *(
+                PoseTrajectory(body_target(a, yaw_a), yaw_a, body_target(b, yaw_b), yaw_b, limits)
+                for (a, yaw_a), (b, yaw_b) in itertools.pairwise(waypoints)
+            ),
+        ]
+    )
     period = sim.scenario.control_period_s
     frame_every = 1.0 / params.frame_rate_hz
     elapsed, next_frame = 0.0, params.settle_s
-    for leg_index, leg in enumerate(legs):
-        t = 0.0
-        while t < leg.duration - 1e-9:
-            command = controller.update(sim.estimate(robot), leg.at(t), period)
-            sim.step({robot: command})
-            t += period
-            elapsed += period
-            if leg_index > 0 and elapsed >= next_frame - 1e-9:
-                next_frame += frame_every
-                _write_frame(sim, writer, robot, offsets["left"])
-                if params.max_frames is not None and len(writer.frames) >= params.max_frames:
-                    return load_recording(out_dir)
-            if progress is not None:
-                progress(elapsed, total)
+    while elapsed < route.duration - 1e-9:
+        command = controller.update(sim.estimate(robot), route.at(elapsed), period)
+        sim.step({robot: command})
+        elapsed += period
+        if elapsed >= next_frame - 1e-9:  # frames from the end of the settling hold on
+            next_frame += frame_every
+            _write_frame(sim, writer, robot, offsets["left"])
+            if params.max_frames is not None and len(writer.frames) >= params.max_frames:
+                return load_recording(out_dir)
+        if progress is not None:
+            progress(elapsed, route.duration)
     if not writer.frames or sim.time > writer.frames[-1]["time_s"] + 1e-6:
         _write_frame(sim, writer, robot, offsets["left"])  # the end of the path
     return load_recording(out_dir)

@@ -12,10 +12,9 @@ Anything wrong gives one line naming the file and the value (ValueError).
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
-from envs.scenario import SCENARIO_DIR, Scenario, ScenarioError, scenario_from_dict
+from envs.scenario import SCENARIO_DIR, Scenario, ScenarioError, read_scenario_file, scenario_from_dict
 from maptidal.mission.run import MissionEvent
 
 DEFAULT_MISSION = SCENARIO_DIR / "mission.toml"
@@ -25,15 +24,7 @@ EVENT_KEYS = {"time_s", "kind", "robot", "current"}
 
 def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
     """The scenario and the ``[mission]`` settings (``duration_s``, ``events`` as MissionEvents, ...)."""
-    path = Path(path) if path is not None else DEFAULT_MISSION
-    if not path.exists() and (SCENARIO_DIR / f"{path}.toml").exists():
-        path = SCENARIO_DIR / f"{path}.toml"
-    if not path.is_file():
-        raise ValueError(f"mission scenario not found: {path}")
-    try:
-        document = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        raise ValueError(f"{path}: not valid TOML ({err})") from None
+    path, document = read_scenario_file(path, DEFAULT_MISSION)
     table = document.pop("mission", {})
     try:
         scenario = scenario_from_dict(document, path.parent)

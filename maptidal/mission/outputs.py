@@ -64,26 +64,30 @@ class MissionWriter:
         """Add the coverage of the captured views, write ``mission.json``, the plots and ``report.md``."""
         self._events.close()
         self._trajectories.close()
-        document["coverage"] = coverage_of(views, tank)
+        document["coverage"], occluded = coverage_of(views, tank)
         atomic_write_json(self.root / "mission.json", document)
-        write_plots(self.root, document, views, tank)
+        write_plots(self.root, document, views, tank, occluded)
         atomic_write_text(self.root / "report.md", report_markdown(document))
         return document
 
 
-def coverage_of(views: np.ndarray, tank) -> dict:
-    """[coverage]'s report of the viewpoints ``(N, 6)``, with occlusion on and off."""
+def coverage_of(views: np.ndarray, tank) -> tuple[dict, tuple | None]:
+    """[coverage]'s report of the viewpoints ``(N, 6)``, with occlusion on and off, and the occluded
+    evaluation (model, report, views per voxel) for the plots (None without viewpoints)."""
     from maptidal.coverage import CoverageModel, CoverageParams
 
-    out = {}
+    out, occluded = {}, None
     for occlusion in (True, False):
-        model = CoverageModel.from_tank(tank, CoverageParams(occlusion=occlusion))
+        name = "occluded" if occlusion else "unoccluded"
         if len(views) == 0:
-            out["occluded" if occlusion else "unoccluded"] = {"n_viewpoints": 0, "pct_uninspected": 100.0}
+            out[name] = {"n_viewpoints": 0, "pct_uninspected": 100.0}
             continue
-        report, _ = model.evaluate(views)
-        out["occluded" if occlusion else "unoccluded"] = report.to_dict()
-    return out
+        model = CoverageModel.from_tank(tank, CoverageParams(occlusion=occlusion))
+        report, per_voxel = model.evaluate(views)
+        out[name] = report.to_dict()
+        if occlusion:
+            occluded = (model, report, per_voxel)
+    return out, occluded
 
 
 def read_events(root) -> list[dict]:
@@ -97,14 +101,14 @@ def read_events(root) -> list[dict]:
     return events
 
 
-def write_plots(root: Path, document: dict, views: np.ndarray, tank) -> None:
-    """The top view, the coverage histogram, the views-per-voxel map and the timeline."""
+def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: tuple | None) -> None:
+    """The top view, the coverage histogram and the views-per-voxel map (from ``occluded``, the evaluation
+    :func:`coverage_of` made) and the timeline."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from maptidal.coverage import CoverageModel, CoverageParams
     from maptidal.coverage_plots import plot_histograms, plot_voxel_views
 
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -142,9 +146,8 @@ def write_plots(root: Path, document: dict, views: np.ndarray, tank) -> None:
     figure.savefig(root / "top_view.png", dpi=110)
     plt.close(figure)
 
-    if len(views):
-        model = CoverageModel.from_tank(tank, CoverageParams(occlusion=True))
-        report, per_voxel = model.evaluate(views)
+    if occluded is not None:
+        model, report, per_voxel = occluded
         plot_histograms(
             {"mission": report}, root / "histogram.png", title="Views per voxel against the ideal gamma"
         )
@@ -303,8 +306,8 @@ def rebuild(root, tank) -> dict:
         "tasks": sorted(tasks.values(), key=lambda t: t["id"]),
     }
     views_array = np.array(views).reshape(-1, 6)
-    document["coverage"] = coverage_of(views_array, tank)
+    document["coverage"], occluded = coverage_of(views_array, tank)
     atomic_write_json(root / "mission.json", document)
-    write_plots(root, document, views_array, tank)
+    write_plots(root, document, views_array, tank, occluded)
     atomic_write_text(root / "report.md", report_markdown(document))
     return document

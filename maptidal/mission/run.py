@@ -32,7 +32,7 @@ import numpy as np
 
 from controllers.estimation import rotation_from_rpy
 from controllers.pose import PoseController
-from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory
+from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, Route
 from envs.scenario import Scenario, inside_tank, load_scenario
 from envs.simulation import Simulation
 from envs.world import camera_offsets
@@ -128,8 +128,8 @@ class _Robot:
     left_offset: np.ndarray
     centre: np.ndarray
     activity: str = "explore"  # explore, fly, hold, idle, failed
-    legs: list = field(default_factory=list)
-    leg_start_s: float = 0.0
+    route: Route | None = None
+    route_start_s: float = 0.0
     task_key: int | None = None
     task_started_s: float = 0.0
     within_since_s: float | None = None
@@ -221,20 +221,17 @@ class Mission:
         here, yaw = estimate.position.copy(), estimate.yaw
         sweep = math.radians(self.params.explore_yaw_deg)
         limits = self._limits()
-        robot.legs = [
-            PoseTrajectory(here, yaw, here, yaw + sweep, limits),
-            PoseTrajectory(here, yaw + sweep, here, yaw - sweep, limits),
-            PoseTrajectory(here, yaw - sweep, here, yaw, limits),
-        ]
-        robot.leg_start_s = now
+        robot.route = Route(
+            [
+                PoseTrajectory(here, yaw, here, yaw + sweep, limits),
+                PoseTrajectory(here, yaw + sweep, here, yaw - sweep, limits),
+                PoseTrajectory(here, yaw - sweep, here, yaw, limits),
+            ]
+        )
+        robot.route_start_s = now
 
     def _reference(self, robot: _Robot, now: float):
-        while robot.legs and now - robot.leg_start_s > robot.legs[0].duration:
-            if len(robot.legs) == 1:
-                break
-            robot.leg_start_s += robot.legs[0].duration
-            robot.legs.pop(0)
-        reference = robot.legs[0].at(now - robot.leg_start_s)
+        reference = robot.route.at(now - robot.route_start_s)
         if self._lost(robot, now):
             # no horizontal position for a while (no DVL, no visual fix): hold depth and heading, and do not
             # chase a goal the robot cannot tell it has reached (that flies it away at full speed)
@@ -417,7 +414,7 @@ class Mission:
     def _advance_activity(self, robot: _Robot, now: float) -> None:
         agent = self.auction.agents[robot.index]
         if robot.activity == "explore":
-            if now - robot.leg_start_s >= sum(leg.duration for leg in robot.legs):
+            if now - robot.route_start_s >= robot.route.duration:
                 robot.explored = True
                 robot.activity = "idle"
                 self.writer.event(now, "explored", robot=robot.name)
@@ -431,8 +428,10 @@ class Mission:
             estimate = self._estimate(robot)
             yaw = math.atan2(task.direction[1], task.direction[0])
             goal = task.position - rotation_from_rpy(0.0, 0.0, yaw) @ robot.centre
-            robot.legs = [PoseTrajectory(estimate.position.copy(), estimate.yaw, goal, yaw, self._limits())]
-            robot.leg_start_s, robot.task_started_s, robot.task_key = now, now, key
+            robot.route = Route(
+                [PoseTrajectory(estimate.position.copy(), estimate.yaw, goal, yaw, self._limits())]
+            )
+            robot.route_start_s, robot.task_started_s, robot.task_key = now, now, key
             robot.within_since_s = None
             robot.activity = "fly"
             self.tasks.get(key, {})["assigned_to"] = robot.name
@@ -444,13 +443,13 @@ class Mission:
                 robot.activity = "idle"  # done by another robot, or re-allocated
                 self.writer.event(now, "released", robot=robot.name, task=key)
                 return
-            leg = robot.legs[0]
+            goal = robot.route.at(robot.route.duration)
             estimate = self._estimate(robot)
-            close = np.linalg.norm(estimate.position - leg.goal) <= self.params.position_tolerance_m
-            aligned = abs(
-                math.remainder(leg.start_yaw + leg.turn - estimate.yaw, 2 * math.pi)
-            ) <= math.radians(self.params.yaw_tolerance_deg)
-            arrived = now - robot.leg_start_s >= leg.duration
+            close = np.linalg.norm(estimate.position - goal.position) <= self.params.position_tolerance_m
+            aligned = abs(math.remainder(goal.yaw - estimate.yaw, 2 * math.pi)) <= math.radians(
+                self.params.yaw_tolerance_deg
+            )
+            arrived = now - robot.route_start_s >= robot.route.duration
             if arrived and close and aligned:
                 robot.within_since_s = robot.within_since_s if robot.within_since_s is not None else now
                 if now - robot.within_since_s >= self.params.dwell_s:
@@ -495,13 +494,7 @@ class Mission:
     def document(self, now: float, wall_s: float, finished: bool) -> dict:
         """The ``mission.json`` document as of now."""
         stats = self.auction.channel.stats
-        conflicts = 0
-        alive = [a for a in self.auction.agents.values() if a.alive]
-        held: dict[int, int] = {}
-        for agent in alive:
-            for slot in agent.bundle:
-                held[agent.tasks[slot].key] = held.get(agent.tasks[slot].key, 0) + 1
-        conflicts = sum(1 for count in held.values() if count > 1)
+        conflicts = self.auction.report(converged=False).conflicts  # tasks in two live bundles now
         return {
             "finished": finished,
             "realtime_factor": now / wall_s if wall_s > 0 else None,

@@ -74,10 +74,12 @@ class FrameRecord:
 @dataclass
 class KeyframeOutput:
     """A keyframe for discovery (:class:`maptidal.keyframes.Keyframe`) and what its overlays show: the
-    frame it came from, its keypoints (pixels), which were tracked, and the observations per vertex."""
+    frame it came from and the pose used there, its keypoints (pixels), which were tracked, and the
+    observations per vertex."""
 
     keyframe: Keyframe
     frame_index: int
+    pose: CameraPose
     pixels: np.ndarray
     tracked: np.ndarray
     observations: np.ndarray
@@ -94,11 +96,8 @@ class FrontEnd:
         self.intrinsics = intrinsics
         self.pose_source = pose_source
         self.params = params or FrontEndParams()
-        tracker = self.params.tracker
-        if tracker.keypoints != self.params.stereo:
-            tracker = TrackerParams(
-                tracker.window_px, tracker.pyramid_levels, tracker.forward_backward_px, self.params.stereo
-            )
+        # the tracker refills with the stereo front end's own detector settings
+        tracker = dataclasses.replace(self.params.tracker, keypoints=self.params.stereo)
         self.tracker = LandmarkTracker(tracker)
         self.landmarks = LandmarkMap(self.params.fusion)
         self.selector = KeyframeSelector(self.params.keyframes)
@@ -173,7 +172,7 @@ class FrontEnd:
         )
         self.keyframes_made += 1
         clock["meshing"] += time.perf_counter() - start
-        return record, KeyframeOutput(keyframe, index, pixels, tracked, observations)
+        return record, KeyframeOutput(keyframe, index, pose, pixels, tracked, observations)
 
 
 @dataclass
