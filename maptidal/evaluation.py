@@ -13,8 +13,6 @@ import csv
 import io
 import itertools
 import os
-import signal
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -29,6 +27,7 @@ from maptidal.baselines import (
 from maptidal.camera import StereoCameraParams
 from maptidal.coverage import CoverageModel, CoverageParams, CoverageReport
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams, DiscoveryResult, discover
+from maptidal.executors import run_jobs
 from maptidal.files import atomic_write_json, atomic_write_text, save_tasks
 from maptidal.free_space import free_space_counts, free_space_mask
 from maptidal.keyframes import (
@@ -408,9 +407,7 @@ def grid_size(grid: dict[str, tuple[float, ...]]) -> int:
     return len(grid["t"]) * len(grid["r_ex"]) * len(grid["theta_ex"])
 
 
-def _worker_setup(config: EvaluationConfig, in_subprocess: bool = False) -> None:
-    if in_subprocess:  # Ctrl-C is the parent's to handle: workers must not print tracebacks
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+def _worker_setup(config: EvaluationConfig) -> None:
     tank = TankModel(load_tank_config(config.tank_path))
     _WORKER_STATE["config"] = config
     _WORKER_STATE["tank"] = tank
@@ -435,11 +432,13 @@ def run_sweep(
     jobs: int = 1,
     plots: bool = True,
     progress: bool = True,
+    executor: str = "local",
+    ray_address: str | None = None,
 ) -> list[dict]:
     """Evaluate Map-TIDAL over a grid of (t, r_ex, theta_ex); write CSV, markdown and heatmaps.
 
-    Runs in ``jobs`` local processes; rows come back in grid order whatever the
-    finishing order, and the CSV is rewritten (atomically) as each one lands.
+    Runs in ``jobs`` local processes, or on Ray (:func:`maptidal.executors.run_jobs`); rows come back
+    in grid order whatever the finishing order, and the CSV is rewritten (atomically) as each one lands.
     """
     grid = grid or DEFAULT_GRID
     config = config or EvaluationConfig()
@@ -447,28 +446,27 @@ def run_sweep(
         for value in values:
             replace(config.discovery, **{GRID_TO_PARAM[name]: value})  # validates every value up front
     combinations = list(itertools.product(grid["t"], grid["r_ex"], grid["theta_ex"]))
-    jobs = max(1, min(jobs, len(combinations), os.cpu_count() or 1))  # more would only wait
+    if executor == "local":
+        jobs = max(1, min(jobs, len(combinations), os.cpu_count() or 1))  # more would only wait
     bar = ProgressBar(len(combinations), "sweep", enabled=progress)
     out = Path(out_dir) if out_dir is not None else None
     results: dict[int, dict] = {}
-    if jobs <= 1:
-        _worker_setup(config)
-        outcomes = map(_evaluate_combination, combinations)
-        executor = None
-    else:
-        executor = ProcessPoolExecutor(max_workers=jobs, initializer=_worker_setup, initargs=(config, True))
-        outcomes = executor.map(_evaluate_combination, combinations)
-    try:
-        for index, row in enumerate(outcomes):
-            results[index] = row
-            bar.advance(
-                note=f"t={row['t']:g} r_ex={row['r_ex']:g} theta_ex={row['theta_ex']:g}: {row['tasks']} tasks"
-            )
-            if out is not None:
-                atomic_write_text(out / "sweep.csv", sweep_csv([results[k] for k in sorted(results)]))
-    finally:
-        if executor is not None:
-            executor.shutdown(cancel_futures=True)
+    outcomes = run_jobs(
+        _evaluate_combination,
+        combinations,
+        executor=executor,
+        jobs=jobs,
+        ray_address=ray_address,
+        initializer=_worker_setup,
+        initargs=(config,),
+    )
+    for index, row in outcomes:
+        results[index] = row
+        bar.advance(
+            note=f"t={row['t']:g} r_ex={row['r_ex']:g} theta_ex={row['theta_ex']:g}: {row['tasks']} tasks"
+        )
+        if out is not None:
+            atomic_write_text(out / "sweep.csv", sweep_csv([results[k] for k in sorted(results)]))
     rows = [results[k] for k in sorted(results)]
     if out is not None:
         atomic_write_text(out / "sweep.md", sweep_markdown(rows))

@@ -212,3 +212,34 @@ def coverage_params_from(args: argparse.Namespace, discovery: DiscoveryParams | 
         vfov_deg=camera.vfov_deg,
         occlusion=args.occlusion,
     )
+
+
+def add_executor_args(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--jobs``, ``--executor local|ray`` and ``--ray-address`` (:mod:`maptidal.executors`)."""
+    parser.add_argument(
+        "--jobs",
+        type=positive_int,
+        default=1,
+        metavar="N",
+        help=f"{what} at once: local processes (at most the CPU count), or the CPUs of a local Ray "
+        "instance (default %(default)s)",
+    )
+    parser.add_argument(
+        "--executor",
+        choices=("local", "ray"),
+        default="local",
+        help="local processes (default), or a Ray cluster (pip install -e .[ray]); the same runs give "
+        "the same numbers on either",
+    )
+    parser.add_argument(
+        "--ray-address",
+        metavar="ADDR",
+        help="the Ray cluster to join (ray.init(address=ADDR), e.g. 10.0.0.2:6379 or auto); without it, "
+        "--executor ray starts a local Ray instance with --jobs CPUs",
+    )
+
+
+def check_executor_args(args: argparse.Namespace) -> None:
+    """Refuse ``--ray-address`` without ``--executor ray`` before any work."""
+    if args.ray_address is not None and args.executor != "ray":
+        raise ValueError("--ray-address needs --executor ray")

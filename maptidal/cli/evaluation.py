@@ -12,11 +12,12 @@ from pathlib import Path
 from maptidal.cli.common import (
     add_coverage_args,
     add_discovery_params,
+    add_executor_args,
     add_output_folder,
+    check_executor_args,
     coverage_params_from,
     discovery_params_from,
     output_dir,
-    positive_int,
 )
 
 
@@ -80,7 +81,8 @@ def register(commands) -> None:
         "sweep",
         help="Map-TIDAL over a grid of t, r_ex and theta_ex (Table I)",
         description="Evaluate Map-TIDAL's coverage for every combination of the grid, in parallel local "
-        "processes; writes sweep.csv, sweep.md (Table I's layout) and sweep.png (heatmaps).",
+        "processes or on a Ray cluster; writes sweep.csv, sweep.md (Table I's layout) and sweep.png "
+        "(heatmaps).",
     )
     sweep.add_argument(
         "--grid",
@@ -90,13 +92,7 @@ def register(commands) -> None:
         "default t=0.70,0.75,0.80 r_ex=1.5,1.6,1.7,1.8 theta_ex=0.25,0.3",
     )
     add_output_folder(sweep, "runs/sweep")
-    sweep.add_argument(
-        "--jobs",
-        type=positive_int,
-        default=1,
-        metavar="N",
-        help="local processes, at most the grid size and the CPU count (default %(default)s)",
-    )
+    add_executor_args(sweep, "grid cells")
     sweep.add_argument("--seed", type=int, default=0, help="seed of the keyframes (default %(default)s)")
     noise = commands.add_parser(
         "noise-curve",
@@ -277,12 +273,24 @@ def run_sweep(args: argparse.Namespace) -> int:
 
     if args.paper_grid and args.grid:
         raise ValueError("--paper-grid is the paper's grid: give it or --grid, not both")
+    check_executor_args(args)
     grid = dict(PAPER_GRID) if args.paper_grid else parse_grid(args.grid or [])
-    jobs = min(args.jobs, grid_size(grid), os.cpu_count() or 1)
-    if jobs < args.jobs:
-        print(f"maptidal sweep: using {jobs} processes (grid size and CPU count)", file=sys.stderr)
+    jobs = args.jobs
+    if args.executor == "local":
+        jobs = min(args.jobs, grid_size(grid), os.cpu_count() or 1)
+        if jobs < args.jobs:
+            print(f"maptidal sweep: using {jobs} processes (grid size and CPU count)", file=sys.stderr)
     plots = not args.no_plots
-    rows = run_sweep(args.out, grid, _evaluation_config(args), jobs=jobs, plots=plots, progress=not args.json)
+    rows = run_sweep(
+        args.out,
+        grid,
+        _evaluation_config(args),
+        jobs=jobs,
+        plots=plots,
+        progress=not args.json,
+        executor=args.executor,
+        ray_address=args.ray_address,
+    )
     files = ["sweep.csv", "sweep.md"] + (["sweep.png"] if plots else [])
     if args.paper_grid:
         cells = side_by_side(rows)

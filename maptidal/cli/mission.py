@@ -4,14 +4,19 @@ the event log."""
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from pathlib import Path
 
-from maptidal.cli.common import add_output_folder, positive_float, positive_int
+from maptidal.cli.common import (
+    add_executor_args,
+    add_output_folder,
+    check_executor_args,
+    positive_float,
+    positive_int,
+)
 
 
 def register(commands) -> None:
-    """Add the ``run`` and ``report`` subcommands."""
+    """Add the ``run``, ``report`` and ``batch`` subcommands."""
     run = commands.add_parser(
         "run",
         help="fly the closed-loop mission: see, map, discover, auction, fly, inspect",
@@ -35,7 +40,7 @@ def register(commands) -> None:
     )
     run.add_argument("--seed", type=int, default=0, help="seed of the sensor and camera noise (default 0)")
     run.add_argument(
-        "--pose", choices=("truth", "dr", "vo"), help="pose source of the front end (default dr)"
+        "--pose", choices=("truth", "dr", "vo"), help="pose source of the front end (default vo)"
     )
     add_output_folder(run, "runs/mission")
     run.set_defaults(handler=run_mission)
@@ -52,24 +57,43 @@ def register(commands) -> None:
     )
     report.set_defaults(handler=run_report)
 
+    batch = commands.add_parser(
+        "batch",
+        help="Monte-Carlo missions over seeds, locally or on a Ray cluster, aggregated",
+        description="Fly the mission once per seed, in local processes or on a Ray cluster, and aggregate "
+        "the metrics (coverage, tasks found and done, completion time, messages and bytes sent): "
+        "batch.csv (a row per seed, written as runs land), batch.json (rows, mean, std, min, max), "
+        "batch.md and batch.png; each mission's own outputs go to seed_NNN/ under --out. The same "
+        "seeds give the same numbers on either executor.",
+    )
+    batch.add_argument(
+        "scenario", nargs="?", metavar="SCENARIO", help="mission scenario TOML (default: mission.toml)"
+    )
+    batch.add_argument(
+        "--seeds", default="1-10", metavar="SEEDS", help="N, N-M or a comma list (default %(default)s)"
+    )
+    batch.add_argument(
+        "--robots", type=positive_int, metavar="N", help="use the first N robots of the scenario"
+    )
+    batch.add_argument(
+        "--duration", type=positive_float, metavar="S", help="simulated seconds of each mission"
+    )
+    batch.add_argument(
+        "--pose", choices=("truth", "dr", "vo"), help="pose source of the front end (default vo)"
+    )
+    add_executor_args(batch, "missions")
+    add_output_folder(batch, "runs/batch")
+    batch.set_defaults(handler=run_batch_command)
+
 
 def run_mission(args: argparse.Namespace) -> int:
     """Handler of ``maptidal run``."""
-    from maptidal.mission.config import load_mission
+    from maptidal.mission.config import prepare_mission
     from maptidal.mission.outputs import summary_table
-    from maptidal.mission.run import Mission, MissionParams
+    from maptidal.mission.run import Mission
     from maptidal.progress import ProgressBar
 
-    scenario, settings = load_mission(args.scenario)
-    if args.robots is not None:
-        if args.robots > len(scenario.robots):
-            raise ValueError(f"--robots {args.robots}: the scenario has {len(scenario.robots)} robots")
-        scenario = dataclasses.replace(scenario, robots=scenario.robots[: args.robots])
-    if args.duration is not None:
-        settings["duration_s"] = args.duration
-    if args.pose is not None:
-        settings["pose_source"] = args.pose
-    params = MissionParams(seed=args.seed, **settings)
+    scenario, params = prepare_mission(args.scenario, args.robots, args.duration, args.pose, args.seed)
     mission = Mission(scenario, params, args.out)
     bar = ProgressBar(100, "mission")
     state = {"shown": 0}
@@ -95,4 +119,33 @@ def run_report(args: argparse.Namespace) -> int:
     document = rebuild(args.mission_dir, scenario.tank)
     print(summary_table(document))
     print(f"report: {Path(args.mission_dir) / 'report.md'}")
+    return 0
+
+
+def run_batch_command(args: argparse.Namespace) -> int:
+    """Handler of ``maptidal batch``."""
+    import os
+    import sys
+
+    from maptidal.mission.batch import batch_markdown, parse_seeds, run_batch
+
+    check_executor_args(args)
+    seeds = parse_seeds(args.seeds)
+    jobs = args.jobs
+    if args.executor == "local" and jobs > (os.cpu_count() or 1):
+        jobs = os.cpu_count() or 1
+        print(f"maptidal batch: using {jobs} processes (the CPU count)", file=sys.stderr)
+    rows, summary = run_batch(
+        args.scenario,
+        seeds,
+        args.out,
+        executor=args.executor,
+        jobs=jobs,
+        ray_address=args.ray_address,
+        robots=args.robots,
+        duration_s=args.duration,
+        pose_source=args.pose,
+    )
+    print(batch_markdown(summary, len(rows)))
+    print(f"files in {args.out}: batch.csv, batch.json, batch.md, batch.png, seed_NNN/")
     return 0

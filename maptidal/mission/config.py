@@ -12,10 +12,11 @@ Anything wrong gives one line naming the file and the value (ValueError).
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from envs.scenario import SCENARIO_DIR, Scenario, ScenarioError, read_scenario_file, scenario_from_dict
-from maptidal.mission.run import MissionEvent
+from maptidal.mission.run import MissionEvent, MissionParams
 
 DEFAULT_MISSION = SCENARIO_DIR / "mission.toml"
 MISSION_KEYS = {"duration_s", "events", "pose_source", "frame_rate_hz"}
@@ -55,3 +56,24 @@ def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
             raise ValueError(f"{path}: mission event {number}: {err}") from None
     settings["events"] = tuple(events)
     return scenario, settings
+
+
+def prepare_mission(
+    path: str | Path | None = None,
+    robots: int | None = None,
+    duration_s: float | None = None,
+    pose_source: str | None = None,
+    seed: int = 0,
+) -> tuple[Scenario, MissionParams]:
+    """The scenario and the MissionParams of a mission file, with the command line's overrides: the first
+    ``robots`` robots, the duration and the front end's pose source (``maptidal run`` and ``batch``)."""
+    scenario, settings = load_mission(path)
+    if robots is not None:
+        if not 1 <= robots <= len(scenario.robots):
+            raise ValueError(f"--robots {robots}: the scenario has {len(scenario.robots)} robots")
+        scenario = dataclasses.replace(scenario, robots=scenario.robots[:robots])
+    if duration_s is not None:
+        settings["duration_s"] = duration_s
+    if pose_source is not None:
+        settings["pose_source"] = pose_source
+    return scenario, MissionParams(seed=seed, **settings)

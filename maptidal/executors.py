@@ -1,0 +1,131 @@
+"""Where many independent runs go: local processes, or a Ray cluster (``maptidal batch`` and ``sweep``).
+
+:func:`run_jobs` calls ``function(item)`` for every item and yields ``(index, result)`` as each run
+finishes, whatever the executor. A run is a pure function of its item (missions and sweep cells seed
+everything they draw from the item), so the same items give the same results locally and on Ray.
+
+- ``local`` with one job runs in this process; with more, in a pool of fresh (spawned) processes, so no
+  GL context or thread is inherited from the parent.
+- ``ray`` sends the runs to a Ray cluster: ``ray.init(address=...)`` with ``ray_address``, or a local
+  Ray instance with ``jobs`` CPUs when no address is given. Every node must have maptidal installed (the
+  functions travel by reference, as importable names). Ray is an optional extra (``pip install -e .[ray]``).
+
+An optional ``initializer(*initargs)`` runs once in each worker process before its first run (the sweep
+uses it to build its keyframes and coverage model once per process rather than once per cell).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import uuid
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from typing import Any
+
+EXECUTORS = ("local", "ray")
+# the worker processes render headless, as the parent does (README, "Two commands")
+WORKER_ENVIRONMENT = ("MUJOCO_GL", "PYOPENGL_PLATFORM")
+
+_initialised: set[str] = set()  # the initializer tokens already run in this (worker) process
+
+
+def _local_worker_setup(initializer: Callable | None, initargs: tuple) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    if initializer is not None:
+        initializer(*initargs)
+
+
+def _call_once_initialised(token: str, initializer: Callable | None, initargs: tuple, function, item):
+    """A Ray task: run the initializer the first time this worker process sees ``token``, then the run."""
+    if initializer is not None and token not in _initialised:
+        initializer(*initargs)
+        _initialised.add(token)
+    return function(item)
+
+
+def run_jobs(
+    function: Callable[[Any], Any],
+    items: Iterable[Any],
+    executor: str = "local",
+    jobs: int = 1,
+    ray_address: str | None = None,
+    initializer: Callable | None = None,
+    initargs: tuple = (),
+) -> Iterator[tuple[int, Any]]:
+    """Run ``function`` on every item; yield ``(index, result)`` as runs finish (module docstring).
+
+    A run that raises re-raises here, and the runs not yet started are cancelled."""
+    if executor not in EXECUTORS:
+        raise ValueError(f"unknown executor {executor!r}; known: {', '.join(EXECUTORS)}")
+    if jobs < 1:
+        raise ValueError(f"jobs must be at least 1, got {jobs}")
+    if ray_address is not None and executor != "ray":
+        raise ValueError("a Ray address needs --executor ray")
+    items = list(items)
+    if executor == "ray":
+        yield from _run_on_ray(function, items, jobs, ray_address, initializer, initargs)
+    elif jobs == 1 or len(items) <= 1:
+        if initializer is not None:
+            initializer(*initargs)
+        for index, item in enumerate(items):
+            yield index, function(item)
+    else:
+        yield from _run_in_processes(function, items, jobs, initializer, initargs)
+
+
+def _run_in_processes(function, items, jobs, initializer, initargs) -> Iterator[tuple[int, Any]]:
+    pool = ProcessPoolExecutor(
+        max_workers=min(jobs, len(items)),
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_local_worker_setup,
+        initargs=(initializer, initargs),
+    )
+    try:
+        futures = {pool.submit(function, item): index for index, item in enumerate(items)}
+        pending = set(futures)
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for future in sorted(finished, key=futures.get):
+                yield futures[future], future.result()
+    finally:
+        pool.shutdown(cancel_futures=True)
+
+
+def _run_on_ray(function, items, jobs, address, initializer, initargs) -> Iterator[tuple[int, Any]]:
+    try:
+        import ray
+    except ImportError:
+        raise ValueError("--executor ray needs Ray: pip install -e .[ray]") from None
+    started_here = not ray.is_initialized()
+    if started_here:
+        environment = {name: os.environ[name] for name in WORKER_ENVIRONMENT if name in os.environ}
+        options: dict[str, Any] = {
+            "runtime_env": {"env_vars": environment},
+            "log_to_driver": False,
+            "include_dashboard": False,
+        }
+        if address is None:
+            options["num_cpus"] = jobs  # a local instance of this size, gone when the runs are
+        ray.init(address=address, **options)
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(_call_once_initialised)
+        token = uuid.uuid4().hex
+        references = {
+            remote.remote(token, initializer, initargs, function, item): index
+            for index, item in enumerate(items)
+        }
+        pending = list(references)
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            try:
+                result = ray.get(ready[0])
+            except ray.exceptions.RayTaskError as err:
+                for reference in pending:
+                    ray.cancel(reference)
+                raise err.as_instanceof_cause() from None
+            yield references[ready[0]], result
+    finally:
+        if started_here:
+            ray.shutdown()

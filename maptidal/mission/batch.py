@@ -1,0 +1,227 @@
+"""Monte-Carlo missions (``maptidal batch``): one mission per seed, locally or on a Ray cluster
+(:mod:`maptidal.executors`), and their metrics aggregated into a table and plots.
+
+Each run writes its own mission folder, ``seed_NNN/``, under the batch folder (on a cluster that needs a
+shared file system; the metrics come back to the driver in any case). The driver writes, as each run
+lands:
+
+- ``batch.csv``: a row of metrics per seed, rewritten atomically;
+- at the end, ``batch.json`` (the rows, and the mean, standard deviation, minimum and maximum of every
+  metric), ``batch.md`` (the same as a table) and ``batch.png`` (a panel per metric, every seed a dot).
+
+A mission is a function of its scenario, its settings and its seed alone, so the metrics do not depend on
+the executor, except the wall-clock ones (``realtime_factor``, ``wall_time_s``), which are reported but
+left out of every comparison.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from maptidal.executors import run_jobs
+from maptidal.files import atomic_write_json, atomic_write_text
+from maptidal.progress import ProgressBar
+
+# the per-mission metrics, in table order, with their units (``batch.md``, ``batch.png``)
+METRICS = {
+    "tasks_found": "tasks",
+    "tasks_done": "tasks",
+    "pct_uninspected": "% of walls, occlusion on",
+    "mean_views": "views per voxel",
+    "mad": "MAD",
+    "completion_time_s": "s (the time limit if unfinished)",
+    "messages": "messages",
+    "bytes": "bytes",
+    "lost": "messages lost",
+}
+WALL_CLOCK = ("realtime_factor", "wall_time_s")  # depend on the machine, not on the seed
+
+
+@dataclass(frozen=True)
+class BatchRun:
+    """One mission of a batch: the mission file (None: the default), its seed, its output folder, and the
+    command line's overrides (:func:`maptidal.mission.config.prepare_mission`)."""
+
+    scenario: str | None
+    seed: int
+    out_dir: str
+    robots: int | None = None
+    duration_s: float | None = None
+    pose_source: str | None = None
+
+
+def parse_seeds(text: str) -> list[int]:
+    """Seeds from ``"1-50"``, ``"3"`` or ``"1,4,9-12"``; ValueError with the bad part otherwise."""
+    seeds: list[int] = []
+    for part in text.split(","):
+        match = re.fullmatch(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?", part)
+        if match is None or (match[2] is not None and int(match[2]) < int(match[1])):
+            raise ValueError(f"bad seeds {part.strip()!r} in {text!r}: give N, N-M or a comma list")
+        first = int(match[1])
+        seeds.extend(range(first, int(match[2] or first) + 1))
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds {text!r} repeat a seed")
+    return seeds
+
+
+def mission_metrics(document: dict) -> dict:
+    """A mission document's metrics (:data:`METRICS`, plus ``finished`` and the wall-clock figures)."""
+    tasks = document.get("tasks", [])
+    coverage = document.get("coverage", {}).get("occluded", {})
+    comms = document.get("comms", {})
+    return {
+        "finished": bool(document.get("finished")),
+        "tasks_found": len(tasks),
+        "tasks_done": sum(1 for t in tasks if t.get("completed")),
+        "pct_uninspected": float(coverage.get("pct_uninspected", 100.0)),
+        "mean_views": float(coverage.get("mean_views", 0.0)),
+        "mad": coverage.get("mad"),  # None without captured views
+        "completion_time_s": float(document.get("sim_time_s", 0.0)),
+        "messages": int(comms.get("messages", 0)),
+        "bytes": int(comms.get("bytes", 0)),
+        "lost": int(comms.get("lost", 0)),
+        "realtime_factor": document.get("realtime_factor"),
+        "wall_time_s": document.get("wall_time_s"),
+    }
+
+
+def run_one(run: BatchRun) -> dict:
+    """Fly one mission of a batch (in whichever process the executor chose); returns its metrics row."""
+    from maptidal.mission.config import prepare_mission
+    from maptidal.mission.run import Mission
+
+    scenario, params = prepare_mission(run.scenario, run.robots, run.duration_s, run.pose_source, run.seed)
+    document = Mission(scenario, params, run.out_dir).run()
+    return {"seed": run.seed, "folder": Path(run.out_dir).name, **mission_metrics(document)}
+
+
+def aggregate(rows: list[dict]) -> dict:
+    """Mean, standard deviation (population), minimum and maximum of every metric over the rows."""
+    summary = {}
+    for name in (*METRICS, *WALL_CLOCK):
+        values = np.array([row[name] for row in rows if row.get(name) is not None], float)
+        values = values[np.isfinite(values)]
+        if len(values) == 0:
+            summary[name] = {"mean": None, "std": None, "min": None, "max": None}
+            continue
+        summary[name] = {
+            "mean": float(values.mean()),
+            "std": float(values.std()),
+            "min": float(values.min()),
+            "max": float(values.max()),
+        }
+    summary["finished"] = {"count": sum(1 for row in rows if row["finished"]), "of": len(rows)}
+    return summary
+
+
+def batch_csv(rows: list[dict]) -> str:
+    """The rows as CSV text, a seed per line."""
+    buffer = io.StringIO()
+    names = ["seed", "folder", "finished", *METRICS, *WALL_CLOCK]
+    writer = csv.DictWriter(buffer, fieldnames=names, extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(rows)
+    return buffer.getvalue()
+
+
+def batch_markdown(summary: dict, runs: int) -> str:
+    """The aggregate as a markdown table: metric, mean, spread, range."""
+    lines = [
+        f"# Map-TIDAL missions: {runs} seeds",
+        "",
+        f"Finished before the time limit: {summary['finished']['count']} of {summary['finished']['of']}.",
+        "",
+        "| metric | unit | mean | std | min | max |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, unit in {**METRICS, "realtime_factor": "x real time (this machine)"}.items():
+        figures = summary[name]
+        if figures["mean"] is None:
+            lines.append(f"| {name} | {unit} | n/a | n/a | n/a | n/a |")
+            continue
+        lines.append(
+            f"| {name} | {unit} | {figures['mean']:.3g} | {figures['std']:.3g} | {figures['min']:.3g} "
+            f"| {figures['max']:.3g} |"
+        )
+    lines += ["", "![every seed](batch.png)", ""]
+    return "\n".join(lines)
+
+
+def plot_batch(rows: list[dict], path: Path) -> None:
+    """A panel per metric: every seed a dot, the mean a line, one standard deviation a band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = ("pct_uninspected", "tasks_found", "tasks_done", "completion_time_s", "bytes", "mad")
+    figure, axes = plt.subplots(2, 3, figsize=(11, 6))
+    seeds = [row["seed"] for row in rows]
+    for axis, name in zip(axes.flat, names, strict=True):
+        values = np.array([math.nan if row[name] is None else row[name] for row in rows], float)
+        axis.plot(seeds, values, "o", ms=4)
+        if np.isfinite(values).any():
+            mean, std = np.nanmean(values), np.nanstd(values)
+            axis.axhline(mean, color="k", lw=1)
+            axis.axhspan(mean - std, mean + std, color="k", alpha=0.1, lw=0)
+        axis.set_title(f"{name} ({METRICS[name]})", fontsize=9)
+        axis.set_xlabel("seed", fontsize=8)
+        axis.tick_params(labelsize=8)
+    figure.suptitle(f"Map-TIDAL missions over {len(rows)} seeds (line: mean, band: one std)")
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def run_batch(
+    scenario: str | None,
+    seeds: list[int],
+    out_dir: str | Path,
+    executor: str = "local",
+    jobs: int = 1,
+    ray_address: str | None = None,
+    robots: int | None = None,
+    duration_s: float | None = None,
+    pose_source: str | None = None,
+    progress: bool = True,
+) -> tuple[list[dict], dict]:
+    """Fly a mission per seed (module docstring); returns the rows in seed order and the aggregate.
+
+    The mission file is checked here, before any run starts, so a bad one fails at once."""
+    from maptidal.mission.config import prepare_mission
+
+    if not seeds:
+        raise ValueError("no seeds to run")
+    prepare_mission(scenario, robots, duration_s, pose_source)  # fail fast on a bad file or override
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    runs = [
+        BatchRun(
+            None if scenario is None else str(Path(scenario).resolve()),
+            seed,
+            str((out / f"seed_{seed:03d}").resolve()),
+            robots,
+            duration_s,
+            pose_source,
+        )
+        for seed in seeds
+    ]
+    bar = ProgressBar(len(runs), "batch", enabled=progress)
+    results: dict[int, dict] = {}
+    for index, row in run_jobs(run_one, runs, executor=executor, jobs=jobs, ray_address=ray_address):
+        results[index] = row
+        atomic_write_text(out / "batch.csv", batch_csv([results[k] for k in sorted(results)]))
+        bar.advance(note=f"seed {row['seed']}: {row['tasks_done']}/{row['tasks_found']} tasks done")
+    rows = [results[k] for k in sorted(results)]
+    summary = aggregate(rows)
+    atomic_write_json(out / "batch.json", {"executor": executor, "rows": rows, "summary": summary})
+    atomic_write_text(out / "batch.md", batch_markdown(summary, len(rows)))
+    plot_batch(rows, out / "batch.png")
+    return rows, summary

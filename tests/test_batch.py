@@ -1,0 +1,175 @@
+"""Many missions: the executors (local processes and Ray) and ``maptidal batch``. The same seeds give the
+same numbers locally and on a Ray cluster the test starts itself; the aggregate is checked against numpy
+on the rows; bad seeds, a Ray address without the Ray executor and a bad mission file fail in one line."""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+import shutil
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from cli_helpers import assert_one_line_error, run_maptidal
+
+from maptidal.executors import run_jobs
+from maptidal.mission.batch import METRICS, WALL_CLOCK, aggregate, mission_metrics, parse_seeds
+from maptidal.mission.config import DEFAULT_MISSION as MISSION_FILE
+
+
+def _square(value: int) -> int:
+    return value * value
+
+
+def _fail_on_three(value: int) -> int:
+    if value == 3:
+        raise ArithmeticError("three")
+    return value
+
+
+_SEEN: list[str] = []
+
+
+def _remember(tag: str) -> None:
+    _SEEN.append(tag)
+
+
+def test_parse_seeds():
+    assert parse_seeds("1-4") == [1, 2, 3, 4]
+    assert parse_seeds("7") == [7]
+    assert parse_seeds("1,4,9-11") == [1, 4, 9, 10, 11]
+    for bad in ("5-1", "a", "", "1,,2", "-3", "1,1", "2-3,3"):
+        with pytest.raises(ValueError):
+            parse_seeds(bad)
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_local_runs_come_back_whole_whatever_the_order(jobs):
+    results = dict(run_jobs(_square, range(6), jobs=jobs))
+    assert results == {k: k * k for k in range(6)}
+
+
+def test_a_failing_run_raises_and_the_initializer_runs_once_in_process():
+    _SEEN.clear()
+    assert dict(run_jobs(_square, [2, 3], initializer=_remember, initargs=("x",))) == {0: 4, 1: 9}
+    assert _SEEN == ["x"]
+    for jobs in (1, 2):
+        with pytest.raises(ArithmeticError, match="three"):
+            dict(run_jobs(_fail_on_three, [1, 2, 3, 4], jobs=jobs))
+    with pytest.raises(ValueError, match="unknown executor"):
+        next(run_jobs(_square, [1], executor="slurm"))
+    with pytest.raises(ValueError, match="needs --executor ray"):
+        next(run_jobs(_square, [1], ray_address="127.0.0.1:1"))
+
+
+def test_the_aggregate_is_numpys_over_the_rows():
+    names = (*METRICS, *WALL_CLOCK)
+    data = np.random.default_rng(4).uniform(0, 50, (5, len(names)))
+    rows = [
+        {"seed": s, "finished": s % 2 == 0, **dict(zip(names, map(float, values), strict=True))}
+        for s, values in enumerate(data)
+    ]
+    summary = aggregate(rows)
+    values = np.array([row["bytes"] for row in rows])
+    assert summary["bytes"]["mean"] == pytest.approx(values.mean())
+    assert summary["bytes"]["std"] == pytest.approx(values.std())
+    assert (summary["bytes"]["min"], summary["bytes"]["max"]) == (values.min(), values.max())
+    assert summary["finished"] == {"count": 3, "of": 5}
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def ray_cluster(tmp_path_factory):
+    """A one-node Ray cluster started with ``ray start --head``, as on a real head node; its address.
+
+    It uses token authentication (Ray's default from 2.59 on), with the token in ``RAY_AUTH_TOKEN`` for
+    the head and for the ``maptidal`` processes that join it."""
+    pytest.importorskip("ray")
+    ray_command = Path(sys.executable).with_name("ray")
+    port = _free_port()
+    temp = Path("/tmp") / f"ray_{os.getpid()}"  # Ray's socket paths must stay short
+    environment = pytest.MonkeyPatch()
+    environment.setenv("RAY_AUTH_MODE", "token")
+    environment.setenv("RAY_AUTH_TOKEN", secrets.token_hex(32))
+    started = subprocess.run(
+        [
+            str(ray_command),
+            "start",
+            "--head",
+            f"--port={port}",
+            "--num-cpus=2",
+            "--include-dashboard=false",
+            "--disable-usage-stats",
+            f"--temp-dir={temp}",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert started.returncode == 0, started.stderr
+    try:
+        yield f"127.0.0.1:{port}"
+    finally:
+        subprocess.run([str(ray_command), "stop", "--force"], capture_output=True, timeout=120)
+        shutil.rmtree(temp, ignore_errors=True)
+        environment.undo()
+
+
+def _rows(folder: Path) -> list[dict]:
+    document = json.loads((folder / "batch.json").read_text())
+    return [{k: v for k, v in row.items() if k not in WALL_CLOCK} for row in document["rows"]]
+
+
+def test_a_batch_gives_the_same_numbers_locally_and_on_ray(tmp_path, ray_cluster):
+    common = ["batch", "--seeds", "1-2", "--duration", "30", "--jobs", "2"]
+    local = run_maptidal(*common, "--out", tmp_path / "local")
+    assert local.returncode == 0, local.stderr
+    on_ray = run_maptidal(
+        *common, "--executor", "ray", "--ray-address", ray_cluster, "--out", tmp_path / "ray"
+    )
+    assert on_ray.returncode == 0, on_ray.stderr
+    rows = _rows(tmp_path / "local")
+    assert [row["seed"] for row in rows] == [1, 2]
+    assert rows == _rows(tmp_path / "ray")
+    assert rows[0] != rows[1], "two seeds gave the same mission"
+    for row in rows:
+        mission = json.loads((tmp_path / "local" / row["folder"] / "mission.json").read_text())
+        expected = {k: v for k, v in mission_metrics(mission).items() if k not in WALL_CLOCK}
+        assert {k: row[k] for k in expected} == expected
+        assert row["tasks_found"] > 0 and row["messages"] > 0
+    csv_lines = (tmp_path / "local" / "batch.csv").read_text().splitlines()
+    assert csv_lines[0].startswith("seed,folder,finished") and len(csv_lines) == 3
+    assert (tmp_path / "local" / "batch.png").stat().st_size > 0
+    assert "| tasks_found |" in (tmp_path / "local" / "batch.md").read_text()
+    assert "| tasks_found |" in local.stdout
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (["--seeds", "9-3"], "bad seeds"),
+        (["--ray-address", "127.0.0.1:1"], "needs --executor ray"),
+        (["--jobs", "0"], "must be at least 1"),
+        (["--duration", "-5"], "must be greater than 0"),
+    ],
+)
+def test_bad_batch_arguments_give_one_line(tmp_path, arguments, message):
+    assert_one_line_error(run_maptidal("batch", *arguments, "--out", tmp_path / "b"), message)
+
+
+def test_a_bad_mission_file_fails_before_any_run(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(MISSION_FILE.read_text() + "\n[mission]\nduration_s = 5\nspeed = 3\n")
+    done = run_maptidal("batch", bad, "--seeds", "1-3", "--out", tmp_path / "b")
+    assert_one_line_error(done, "[mission] takes only")
+    assert not (tmp_path / "b" / "seed_001").exists()
