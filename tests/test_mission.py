@@ -11,6 +11,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 from cli_helpers import assert_one_line_error, run_maptidal
 
@@ -123,6 +124,17 @@ def test_a_killed_mission_leaves_a_log_the_report_rebuilds(tmp_path):
         ("[mission]\nduration_s = -3\n", "duration"),
         ('[[mission.events]]\ntime_s = 5\nkind = "fail"\nrobot = "rov7"\n', "rov7"),
         ("[mission]\nspeed = 3\n", "[mission] takes only"),
+        ('[[mission.events]]\ntime_s = 5\nkind = "join"\nrobot = "rov9"\n', "rov9"),
+        ('[[mission.events]]\ntime_s = 5\nkind = "outage"\n', "positive duration_s"),
+        (
+            '[[mission.events]]\ntime_s = 5\nkind = "outage"\nduration_s = 3\nrobots = ["rov0"]\n',
+            "two robots",
+        ),
+        (
+            '[[mission.events]]\ntime_s = 5\nkind = "join"\nrobot = "rov0"\n'
+            '[[mission.events]]\ntime_s = 6\nkind = "join"\nrobot = "rov1"\n',
+            "at least one must start",
+        ),
     ],
 )
 def test_bad_mission_files_give_one_line_and_status_2(tmp_path, mission_table, message):
@@ -173,4 +185,65 @@ def test_a_failed_robots_tasks_pass_to_the_survivor(tmp_path):
     assert not any(
         t["assigned_to"] == "rov1" and t["completion_time"] and t["completion_time"] > 40.0
         for t in document["tasks"]
+    )
+
+
+def _third_robot(scenario, position=(-2.4, 0.0, 1.1)):
+    """The mission scenario with a third Heavy, rov2 (with a DVL), parked at ``position``."""
+    import dataclasses
+
+    first = scenario.robots[0]
+    extra = dataclasses.replace(first, name="rov2", position=position)
+    return dataclasses.replace(scenario, robots=(*scenario.robots, extra))
+
+
+def test_a_robot_joins_the_mission_and_the_auction_when_its_time_comes(tmp_path):
+    """rov2 is parked (it does not move, talk or discover) until its join event at 15 s; then it explores,
+    talks and takes part in the auction, and learns of tasks the others found before it came (some of
+    them: at 500 bit/s, with 250-byte frames every 4 s per robot, a backlog of a hundred tasks takes
+    minutes to pass on)."""
+    from maptidal.mission.outputs import _trajectory_rows
+    from maptidal.mission.run import MissionEvent
+
+    scenario = _third_robot(load_mission(None)[0])
+    params = MissionParams(duration_s=32.0, seed=2, events=(MissionEvent(15.0, "join", "rov2"),))
+    mission = Mission(scenario, params, tmp_path)
+    document = mission.run()
+    senders = [(t, owner) for t, owner, _ in mission.auction.transmissions]
+    assert all(t >= 15.0 for t, owner in senders if owner == 2)
+    assert any(owner == 2 for _, owner in senders), "rov2 never spoke after joining"
+    assert all(t["found_at_s"] >= 15.0 for t in document["tasks"] if t["found_by"] == "rov2")
+    rows = _trajectory_rows(tmp_path)
+    parked = rows[(rows[:, 0] == 2) & (rows[:, 1] < 15.0)][:, 2:5]
+    moved = rows[(rows[:, 0] == 2) & (rows[:, 1] > 25.0)][:, 2:5]
+    assert np.ptp(parked, axis=0).max() < 0.01, "rov2 moved while parked"
+    assert len(moved) and np.abs(moved - parked[0]).max() < 1.0  # it explores where it was launched
+    joiner = mission.auction.agents[2]
+    found_before = {t["id"] for t in document["tasks"] if t["found_at_s"] < 15.0}
+    assert found_before & {t.key for t in joiner.tasks}
+    events = read_events(tmp_path)
+    assert [e["robot"] for e in events if e["kind"] == "join"] == ["rov2"]
+    assert next(e for e in events if e["kind"] == "start")["waiting"] == ["rov2"]
+
+
+def test_a_link_outage_drops_every_message_in_its_window(tmp_path):
+    """All links are down from 5 to 20 s: every broadcast in that window counts as link-down at its one
+    receiver, and none outside it; a pair outage names the two robots' indices."""
+    from maptidal.comms.channel import Outage
+    from maptidal.mission.run import MissionEvent
+
+    scenario, _ = load_mission(None)
+    params = MissionParams(duration_s=28.0, seed=1, events=(MissionEvent(5.0, "outage", duration_s=15.0),))
+    mission = Mission(scenario, params, tmp_path / "all")
+    document = mission.run()
+    inside = sum(1 for t, _, _ in mission.auction.transmissions if 5.0 <= t < 20.0)
+    assert inside > 0
+    stats = mission.auction.channel.stats
+    assert stats.link_down == inside == document["comms"]["link_down"]
+    assert stats.delivered == stats.transmissions - inside - stats.lost - stats.out_of_range
+    pair = MissionParams(
+        duration_s=1.0, events=(MissionEvent(3.0, "outage", duration_s=2.0, robots=("rov1", "rov0")),)
+    )
+    assert Mission(scenario, pair, tmp_path / "pair").auction.channel.params.outages == (
+        Outage(3.0, 5.0, (1, 0)),
     )

@@ -117,6 +117,7 @@ class AuctionSimulation:
         self.transmissions: list[tuple[float, int, int]] = []
         self.time_s = 0.0
         self._next_slot = 0  # for advance_to
+        self._due_events = list(self.events)  # for advance_to, which applies them as their time comes
 
     # ------------------------------------------------------------------ events
     def _apply_event(self, event: AuctionEvent) -> None:
@@ -199,16 +200,26 @@ class AuctionSimulation:
         return not any(a.would_bid() for a in alive)
 
     def advance_to(self, now_s: float) -> int:
-        """Run every TDMA slot due by ``now_s``, for a mission that steps its physics and its auction
-        together; returns how many slots ran. (Do not mix with :meth:`run`.)"""
+        """Run every TDMA slot due by ``now_s``, and apply the events due by then (a robot joining, say),
+        for a mission that steps its physics and its auction together; returns how many slots ran. (Do
+        not mix with :meth:`run`.)"""
         slot_s = self.channel.params.tdma_slot_s
         ran = 0
         while self._next_slot * slot_s <= now_s:
-            self._slot(self.order[self._next_slot % len(self.order)], self._next_slot * slot_s)
+            slot_time = self._next_slot * slot_s
+            self.apply_events_due(slot_time)
+            self._slot(self.order[self._next_slot % len(self.order)], slot_time)
             self._next_slot += 1
             ran += 1
+        self.apply_events_due(now_s)
         self.time_s = now_s
         return ran
+
+    def apply_events_due(self, now_s: float) -> None:
+        """Apply the constructor's events due by ``now_s`` that have not been applied yet (for a mission
+        that steps the auction with :meth:`advance_to`; each event is applied once)."""
+        while self._due_events and self._due_events[0].time_s <= now_s:
+            self._apply_event(self._due_events.pop(0))
 
     def run(
         self, max_time_s: float = 7200.0, progress: Callable[[float], None] | None = None

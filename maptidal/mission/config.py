@@ -4,8 +4,21 @@
     duration_s = 180
     [[mission.events]]
     time_s = 60
-    kind = "fail"          # or "current", with current = [0.1, 0.0, 0.0] (m/s)
+    kind = "fail"          # rov1 stops and falls silent
     robot = "rov1"
+    [[mission.events]]
+    time_s = 30
+    kind = "join"          # rov2, one of the scenario's robots, parked until then, enters the mission
+    robot = "rov2"
+    [[mission.events]]
+    time_s = 90
+    kind = "outage"        # the acoustic links are down for duration_s: all, or those of two robots
+    duration_s = 20
+    robots = ["rov0", "rov1"]
+    [[mission.events]]
+    time_s = 120
+    kind = "current"       # the water's current from then on, m/s in the world frame
+    current = [0.1, 0.0, 0.0]
 
 Anything wrong gives one line naming the file and the value (ValueError).
 """
@@ -16,11 +29,11 @@ import dataclasses
 from pathlib import Path
 
 from envs.scenario import SCENARIO_DIR, Scenario, ScenarioError, read_scenario_file, scenario_from_dict
-from maptidal.mission.run import MissionEvent, MissionParams
+from maptidal.mission.run import MissionEvent, MissionParams, check_events
 
 DEFAULT_MISSION = SCENARIO_DIR / "mission.toml"
 MISSION_KEYS = {"duration_s", "events", "pose_source", "frame_rate_hz"}
-EVENT_KEYS = {"time_s", "kind", "robot", "current"}
+EVENT_KEYS = {"time_s", "kind", "robot", "current", "duration_s", "robots"}
 
 
 def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
@@ -42,7 +55,10 @@ def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
             or "kind" not in entry
             or "time_s" not in entry
         ):
-            raise ValueError(f"{path}: mission event {number} needs time_s and kind (and robot or current)")
+            raise ValueError(
+                f"{path}: mission event {number} needs time_s and kind, and takes only "
+                f"{', '.join(sorted(EVENT_KEYS))}"
+            )
         try:
             events.append(
                 MissionEvent(
@@ -50,6 +66,8 @@ def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
                     str(entry["kind"]),
                     str(entry.get("robot", "")),
                     tuple(float(v) for v in entry.get("current", (0.0, 0.0, 0.0))),
+                    float(entry.get("duration_s", 0.0)),
+                    tuple(str(name) for name in entry.get("robots", ())),
                 )
             )
         except (TypeError, ValueError) as err:
@@ -76,4 +94,6 @@ def prepare_mission(
         settings["duration_s"] = duration_s
     if pose_source is not None:
         settings["pose_source"] = pose_source
-    return scenario, MissionParams(seed=seed, **settings)
+    params = MissionParams(seed=seed, **settings)
+    check_events(params.events, [r.name for r in scenario.robots])
+    return scenario, params

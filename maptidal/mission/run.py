@@ -37,11 +37,11 @@ from envs.scenario import Scenario, inside_tank, load_scenario
 from envs.simulation import Simulation
 from envs.world import camera_offsets
 from maptidal.allocation.agent import AgentParams
-from maptidal.allocation.auction import AuctionSimulation
+from maptidal.allocation.auction import AuctionEvent, AuctionSimulation
 from maptidal.allocation.messages import DONE
 from maptidal.allocation.scoring import AuctionParams, RobotProfile
 from maptidal.camera import StereoCameraParams
-from maptidal.comms.channel import ChannelParams
+from maptidal.comms.channel import ChannelParams, Outage
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
 from maptidal.free_space import free_space_mask
 from maptidal.mission.capture import camera_pose_from_body
@@ -51,7 +51,7 @@ from maptidal.perception.keyframing import KeyframeParams
 from maptidal.perception.odometry import OdometryParams
 from maptidal.perception.recording import CameraIntrinsics, rotation_from_quaternion
 
-EVENT_KINDS = ("fail", "current")
+EVENT_KINDS = ("fail", "join", "outage", "current")
 REACH_MARGIN_M = (
     0.35  # a task closer than this to a wall, the floor or the surface is out of the robot's reach
 )
@@ -59,19 +59,34 @@ REACH_MARGIN_M = (
 
 @dataclass(frozen=True)
 class MissionEvent:
-    """A scripted event: ``fail`` (``robot`` stops at ``time_s``) or ``current`` (the water's current
-    becomes ``current`` m/s from ``time_s``)."""
+    """A scripted event at ``time_s``:
+
+    - ``fail``: ``robot`` stops and falls silent;
+    - ``join``: ``robot`` (one of the scenario's robots, parked at its start pose until then) enters the
+      mission: its estimator starts at its launch pose, it explores, and its CBBA agent joins the auction;
+    - ``outage``: the acoustic links are down for ``duration_s``, all of them, or only the link between
+      the two ``robots`` named;
+    - ``current``: the water's current becomes ``current`` m/s (world frame)."""
 
     time_s: float
     kind: str
     robot: str = ""
     current: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    duration_s: float = 0.0
+    robots: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.kind not in EVENT_KINDS:
             raise ValueError(f"unknown mission event {self.kind!r}; known: {', '.join(EVENT_KINDS)}")
         if not (math.isfinite(self.time_s) and self.time_s >= 0):
             raise ValueError(f"a mission event's time must be finite and >= 0, got {self.time_s!r}")
+        if self.kind in ("fail", "join") and not self.robot:
+            raise ValueError(f"a {self.kind} event names its robot")
+        if self.kind == "outage":
+            if not (math.isfinite(self.duration_s) and self.duration_s > 0):
+                raise ValueError(f"an outage lasts a positive duration_s, got {self.duration_s!r}")
+            if len(self.robots) not in (0, 2) or len(set(self.robots)) != len(self.robots):
+                raise ValueError(f"an outage takes down all links, or the link of two robots: {self.robots}")
 
 
 @dataclass(frozen=True)
@@ -142,13 +157,30 @@ class _Robot:
     fixes_seen: int = 0
     last_fix_s: float = 0.0
     lost: bool = False
+    launch: tuple[np.ndarray, float] | None = None  # a joining robot's parking pose (position, yaw)
+
+    @property
+    def active(self) -> bool:
+        """In the mission now: neither waiting to join nor failed."""
+        return self.activity not in ("waiting", "failed")
 
 
-def _odometry(has_dvl: bool) -> OdometryParams:
-    """Visual odometry's weights for a robot: with a DVL, the dead reckoning drifts less than frame-to-frame
-    vision (0.46 against 0.64 cm on the paper's path, 0.9 against 4.3 cm on the sweep: README), so vision
-    gets 0.2 of the horizontal step; without one, all of it."""
-    return OdometryParams(visual_weight=0.2, has_dvl=has_dvl)
+def check_events(events: tuple[MissionEvent, ...], names: list[str]) -> dict[str, float]:
+    """Check scripted events against the scenario's robots (ValueError naming the problem); returns the
+    join time of each robot that joins later."""
+    for event in events:
+        for name in (event.robot, *event.robots) if event.kind != "current" else ():
+            if name and name not in names:
+                raise ValueError(f"a {event.kind} event names {name!r}; the robots are {', '.join(names)}")
+    joins = {e.robot: e.time_s for e in events if e.kind == "join"}
+    if len(joins) != sum(1 for e in events if e.kind == "join"):
+        raise ValueError("a robot joins once")
+    if len(joins) == len(names):
+        raise ValueError("every robot joins later: at least one must start the mission")
+    for event in events:
+        if event.kind == "fail" and event.robot in joins and event.time_s < joins[event.robot]:
+            raise ValueError(f"{event.robot} fails at {event.time_s} s, before it joins")
+    return joins
 
 
 class Mission:
@@ -158,9 +190,17 @@ class Mission:
         self.params = params
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         names = [r.name for r in self.scenario.robots]
-        for event in params.events:
-            if event.kind == "fail" and event.robot not in names:
-                raise ValueError(f"a fail event names {event.robot!r}; the robots are {', '.join(names)}")
+        index_of = {name: k for k, name in enumerate(names)}
+        joins = check_events(params.events, names)
+        outages = tuple(
+            Outage(
+                e.time_s,
+                e.time_s + e.duration_s,
+                tuple(index_of[n] for n in e.robots) if e.robots else None,  # type: ignore[arg-type]
+            )
+            for e in params.events
+            if e.kind == "outage"
+        )
         width, height = params.image_size
         self.sim = Simulation(
             self.scenario, camera=StereoCameraParams(width=width, height=height), flight_mode="stabilize"
@@ -177,12 +217,14 @@ class Mission:
             self.sim.camera.baseline_m,
         )
         self.robots: dict[str, _Robot] = {}
-        profiles = []
+        profiles, joining = [], []
         for index, spec in enumerate(self.scenario.robots):
             truth = self.sim.ground_truth(spec.name)
-            profiles.append(
-                RobotProfile(spec.name, index, np.asarray(truth["position"]), speed=params.speed_m_s)
-            )
+            profile = RobotProfile(spec.name, index, np.asarray(truth["position"]), speed=params.speed_m_s)
+            if spec.name in joins:
+                joining.append(AuctionEvent(joins[spec.name], "join", profile=profile))
+            else:
+                profiles.append(profile)
             self.robots[spec.name] = _Robot(
                 spec.name,
                 index,
@@ -201,7 +243,11 @@ class Mission:
             robot = self.robots[spec.name]
             rate = params.frame_rate_hz if robot.has_dvl else params.frame_rate_no_dvl_hz
             robot.frame_every_s = 1.0 / rate
-        self.auction = AuctionSimulation(profiles, [], params.channel, AuctionParams(), params.agent)
+            if spec.name in joins:
+                robot.activity = "waiting"
+                robot.launch = (np.asarray(truth["position"], float), float(truth["rpy"][2]))
+        channel = dataclasses.replace(params.channel, outages=params.channel.outages + outages)
+        self.auction = AuctionSimulation(profiles, [], channel, AuctionParams(), params.agent, events=joining)
         self.writer = MissionWriter(out_dir)
         self.tasks: dict[int, dict] = {}  # key -> record (the mission's own ledger, for the outputs)
         self.timing = dict.fromkeys(
@@ -289,8 +335,10 @@ class Mission:
         events = sorted(p.events, key=lambda e: e.time_s)
         wall_start = time.perf_counter()
         for robot in self.robots.values():
-            self._start_exploring(robot, 0.0)
-        self.writer.event(0.0, "start", robots=list(self.robots), pose_source=p.pose_source)
+            if robot.active:
+                self._start_exploring(robot, 0.0)
+        waiting = [r.name for r in self.robots.values() if not r.active]
+        self.writer.event(0.0, "start", robots=list(self.robots), pose_source=p.pose_source, waiting=waiting)
         now = 0.0
         finished = False
         while now < p.duration_s - 1e-9:
@@ -299,27 +347,28 @@ class Mission:
             start = time.perf_counter()
             commands = {}
             for robot in self.robots.values():
-                if robot.activity != "failed":
+                if robot.active:
                     commands[robot.name] = robot.controller.update(
                         self._estimate(robot), self._reference(robot, now), period
                     )
+                elif robot.activity == "waiting":
+                    self.sim.place(robot.name, robot.launch[0], robot.launch[1])  # parked, at rest
             self.timing["control"] += time.perf_counter() - start
             start = time.perf_counter()
             self.sim.step(commands)
             self.timing["physics"] += time.perf_counter() - start
             now = self.sim.time
             for robot in self.robots.values():
-                if robot.activity != "failed":
+                if robot.active:
                     self._advance_activity(robot, now)
             start = time.perf_counter()
             for robot in self.robots.values():
-                agent = self.auction.agents[robot.index]
-                if robot.activity != "failed":
-                    agent.set_position(self._estimate(robot).position)
+                if robot.active:
+                    self.auction.agents[robot.index].set_position(self._estimate(robot).position)
             self.auction.advance_to(now)
             self.timing["allocation"] += time.perf_counter() - start
             for robot in self.robots.values():
-                if robot.activity != "failed" and now >= robot.next_frame_s - 1e-9:
+                if robot.active and now >= robot.next_frame_s - 1e-9:
                     robot.next_frame_s += robot.frame_every_s
                     self._see(robot, now)
             if now >= next_frame - 1e-9:
@@ -351,6 +400,18 @@ class Mission:
             robot.activity = "failed"
             self.auction.agents[robot.index].alive = False
             self.writer.event(now, "fail", robot=robot.name)
+        elif event.kind == "join":
+            robot = self.robots[event.robot]
+            if robot.activity != "waiting":
+                return
+            self.sim.place(robot.name, robot.launch[0], robot.launch[1])  # its estimator starts here
+            robot.activity, robot.next_frame_s = "explore", now
+            self._start_exploring(robot, now)
+            self.auction.apply_events_due(now)  # its CBBA agent joins: the auction's own join event
+            self.writer.event(now, "join", robot=robot.name)
+        elif event.kind == "outage":
+            # the channel carries it (ChannelParams.outages, set up at construction); logged for the record
+            self.writer.event(now, "outage", duration_s=event.duration_s, robots=list(event.robots) or "all")
         elif event.kind == "current":
             self.sim.set_current(event.current)
             self.writer.event(now, "current", current=list(event.current))
@@ -478,7 +539,9 @@ class Mission:
         robot.activity = "idle"
 
     def _finished(self) -> bool:
-        alive = [r for r in self.robots.values() if r.activity != "failed"]
+        if any(r.activity == "waiting" for r in self.robots.values()):
+            return False
+        alive = [r for r in self.robots.values() if r.active]
         if not alive or not all(r.explored for r in alive):
             return False
         views = [self.auction.agents[r.index] for r in alive]
