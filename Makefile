@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.setup-stamp
-RUN_DIR ?= runs/default
+RUN_DIR ?= runs/mission
 
 # Headless rendering through EGL works on CPU-only machines (Mesa) and on NVIDIA GPUs.
 export MUJOCO_GL ?= egl
@@ -27,7 +27,7 @@ $(STAMP): pyproject.toml requirements.lock envs/_hydro.c
 	touch $(STAMP)
 
 run: setup
-	$(BIN)/maptidal compare --out $(RUN_DIR)
+	$(BIN)/maptidal run --out $(RUN_DIR)
 
 test: setup
 	$(BIN)/python -m pytest -q

@@ -1,8 +1,16 @@
 """The MuJoCo simulation: world building, hydrodynamics, sensors, rendering and the
 Gymnasium environments (registered on import: ``envs.gym``). It may import
 ``controllers`` and maptidal's pure modules, never maptidal.mission or maptidal.cli.
+
+Headless rendering through EGL is the default (CPU-only machines through Mesa, and NVIDIA GPUs): it is
+set here, before any module of the package imports mujoco, which reads ``MUJOCO_GL`` when it is first
+imported. A value already in the environment wins.
 """
 
-from envs.gym import register_environments
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from envs.gym import register_environments  # noqa: E402 (after the rendering defaults)
 
 register_environments()

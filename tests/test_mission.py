@@ -247,3 +247,32 @@ def test_a_link_outage_drops_every_message_in_its_window(tmp_path):
     assert Mission(scenario, pair, tmp_path / "pair").auction.channel.params.outages == (
         Outage(3.0, 5.0, (1, 0)),
     )
+
+
+def test_video_has_a_frame_every_half_simulated_second(tmp_path):
+    """--video: mission.mp4 at the asked size, two frames per simulated second, readable by OpenCV, and no
+    partial file left; the frames change as the robots move."""
+    import dataclasses
+
+    import cv2
+
+    scenario, _ = load_mission(None)
+    params = dataclasses.replace(MissionParams(duration_s=6.0, seed=0), video=True, video_size=(320, 200))
+    document = Mission(scenario, params, tmp_path).run()
+    capture = cv2.VideoCapture(str(tmp_path / "mission.mp4"))
+    frames = []
+    while True:
+        ok, frame = capture.read()
+        if not ok:
+            break
+        frames.append(frame)
+    assert len(frames) == document["video"]["frames"] == 13  # at 0, 0.5, ..., 6 s
+    assert frames[0].shape == (200, 320, 3)
+    assert np.abs(frames[-1].astype(int) - frames[0].astype(int)).mean() > 0.5
+    assert not (tmp_path / "mission.part.mp4").exists()
+
+
+def test_the_progress_coverage_is_the_final_reports(short_mission):
+    _, document, _ = short_mission
+    uninspected = document["coverage"]["occluded"]["pct_uninspected"]
+    assert document["inspected_pct"] == pytest.approx(100.0 - uninspected, abs=1e-9)

@@ -20,9 +20,9 @@ import numpy as np
 from gymnasium import spaces
 
 from controllers.estimation import rotation_from_rpy, wrap_angle
-from envs.rendering import CAMERA_SCENE_OPTION
 from envs.scenario import Scenario, load_scenario, with_frame
 from envs.simulation import Simulation
+from envs.views import third_person_frame
 
 ACTIONS = ("pilot", "thrusters")
 IMAGES = (None, "left", "stereo")
@@ -72,28 +72,6 @@ class EnvOptions:
         if unknown:
             raise ValueError(f"unknown option(s) {unknown}; the options are {sorted(known | set(also))}")
         return cls(**options)
-
-
-def third_person_frame(sim: Simulation, renderer: mujoco.Renderer, robots: list[str]) -> np.ndarray:
-    """A view from behind and above the first robot, with each robot's left camera image inset along
-    the top right (what ``render_mode="rgb_array"`` returns)."""
-    import cv2
-
-    camera = mujoco.MjvCamera()
-    camera.type = mujoco.mjtCamera.mjCAMERA_TRACKING
-    camera.trackbodyid = sim.model.body(f"{robots[0]}/base").id
-    camera.distance, camera.elevation, camera.azimuth = 2.5 + 0.5 * (len(robots) - 1), -20.0, 200.0
-    renderer.update_scene(sim.data, camera=camera, scene_option=CAMERA_SCENE_OPTION)  # no sonar rays
-    frame = renderer.render().copy()
-    height, width = frame.shape[:2]
-    size = (width // (2 + len(robots)), height // (2 + len(robots)))
-    right = width - 4
-    for robot in robots:
-        left, _ = sim.render_stereo(robot)
-        inset = cv2.resize(left, size, interpolation=cv2.INTER_AREA)
-        frame[4 : 4 + size[1], right - size[0] : right] = inset
-        right -= size[0] + 4
-    return frame
 
 
 def _has_display() -> bool:

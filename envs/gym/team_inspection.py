@@ -13,10 +13,11 @@ from gymnasium import spaces
 
 from controllers.pose import PoseController
 from controllers.task import TaskExecutor, TaskParams
-from envs.gym.core import SAFE_BOX, EnvOptions, third_person_frame
+from envs.gym.core import SAFE_BOX, EnvOptions
 from envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
 from envs.scenario import Scenario, load_scenario, with_frame
 from envs.simulation import Simulation
+from envs.views import third_person_frame
 from maptidal.baselines import voronoi_viewpoints
 
 MAX_ROBOTS = 4

@@ -215,6 +215,11 @@ class CBBAAgent:
         found = self._sorted_keys[at] == keys
         return np.where(found, self._sort_order[at], -1)
 
+    def is_open(self, key: int) -> bool:
+        """True when this robot knows the task ``key`` and does not believe it done."""
+        slot = self._slot_of.get(key)
+        return slot is not None and self.z[slot] != DONE
+
     def mark_done(self, key: int, now_s: float) -> bool:
         """Record a completed task: it leaves the auction everywhere once the news spreads."""
         slot = self._slot_of.get(key)

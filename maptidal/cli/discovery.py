@@ -44,7 +44,7 @@ def register(commands) -> None:
         help="discovery over a pass of synthetic keyframes along one wall",
         description="Discover tasks frame by frame on Kimera-like keyframe meshes of a wall with a "
         "window and a ladder; writes each keyframe's mesh (frameNN.ply), its tasks, per-frame plots and "
-        "a markdown report. (`make run` runs `maptidal compare`, not this.)",
+        "a markdown report. (`make run` runs the closed-loop mission, `maptidal run`, not this.)",
     )
     add_output_folder(demo, "runs/demo")
     demo.add_argument(

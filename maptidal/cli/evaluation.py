@@ -40,10 +40,10 @@ def register(commands) -> None:
 
     compare = commands.add_parser(
         "compare",
-        help="Map-TIDAL vs Voronoi vs boustrophedon on the tank (what `make run` runs)",
+        help="Map-TIDAL vs Voronoi vs boustrophedon on the tank (the paper's Sec. IV.E comparison)",
         description="Run Map-TIDAL on synthetic exploration keyframes of the tank, and the Voronoi and "
         "boustrophedon baselines, score all three on the same voxels, print the paper's comparison table "
-        "and write compare.json, tasks, plots and report.md. `make run` runs this.",
+        "and write compare.json, tasks, plots and report.md.",
     )
     add_coverage_args(compare)
     compare.add_argument(

@@ -4,6 +4,7 @@ the event log."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 from maptidal.cli.common import (
@@ -19,12 +20,12 @@ def register(commands) -> None:
     """Add the ``run``, ``report`` and ``batch`` subcommands."""
     run = commands.add_parser(
         "run",
-        help="fly the closed-loop mission: see, map, discover, auction, fly, inspect",
+        help="fly the closed-loop mission: see, map, discover, auction, fly, inspect (what `make run` runs)",
         description="Run the headless closed-loop Map-TIDAL mission: robots explore, render stereo "
         "frames, mesh keyframes, discover tasks, auction them with CBBA over the acoustic channel, fly "
         "to them with go-to-pose on their own estimates and capture an image at each. Writes "
         "events.jsonl, trajectories.csv, images/, mission.json (snapshots and final), plots and "
-        "report.md to --out as it goes.",
+        "report.md to --out as it goes. `make run` runs this.",
     )
     run.add_argument(
         "--scenario", metavar="FILE", help="mission scenario TOML (default: assets/scenarios/mission.toml)"
@@ -41,6 +42,12 @@ def register(commands) -> None:
     run.add_argument("--seed", type=int, default=0, help="seed of the sensor and camera noise (default 0)")
     run.add_argument(
         "--pose", choices=("truth", "dr", "vo"), help="pose source of the front end (default vo)"
+    )
+    run.add_argument(
+        "--video",
+        action="store_true",
+        help="also write mission.mp4: a camera behind the team with each robot's view inset, two frames "
+        "per simulated second played at 20 fps",
     )
     add_output_folder(run, "runs/mission")
     run.set_defaults(handler=run_mission)
@@ -94,14 +101,17 @@ def run_mission(args: argparse.Namespace) -> int:
     from maptidal.progress import ProgressBar
 
     scenario, params = prepare_mission(args.scenario, args.robots, args.duration, args.pose, args.seed)
+    if args.video:
+        params = dataclasses.replace(params, video=True)
     mission = Mission(scenario, params, args.out)
     bar = ProgressBar(100, "mission")
     state = {"shown": 0}
 
-    def progress(now: float, found: int, done: int, total: float) -> None:
+    def progress(now: float, found: int, done: int, total: float, inspected: float) -> None:
         percent = int(100 * now / total)
         if percent > state["shown"]:
-            bar.advance(percent - state["shown"], f"{now:.0f}/{total:.0f} s, tasks {done}/{found} done")
+            note = f"{now:.0f}/{total:.0f} s, tasks {done}/{found} done, {inspected:.0f} % inspected"
+            bar.advance(percent - state["shown"], note)
             state["shown"] = percent
 
     document = mission.run(progress)

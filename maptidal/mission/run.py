@@ -35,6 +35,7 @@ from controllers.pose import PoseController
 from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, Route
 from envs.scenario import Scenario, inside_tank, load_scenario
 from envs.simulation import Simulation
+from envs.views import overview_camera, third_person_frame
 from envs.world import camera_offsets
 from maptidal.allocation.agent import AgentParams
 from maptidal.allocation.auction import AuctionEvent, AuctionSimulation
@@ -42,6 +43,7 @@ from maptidal.allocation.messages import DONE
 from maptidal.allocation.scoring import AuctionParams, RobotProfile
 from maptidal.camera import StereoCameraParams
 from maptidal.comms.channel import ChannelParams, Outage
+from maptidal.coverage import CoverageModel, CoverageParams, SeenVoxels
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
 from maptidal.free_space import free_space_mask
 from maptidal.mission.capture import camera_pose_from_body
@@ -122,6 +124,12 @@ class MissionParams:
     )
     events: tuple[MissionEvent, ...] = ()
     seed: int = 0
+    # --video: an MP4 from a camera behind the team, each robot's latest view inset; two frames per
+    # simulated second, played at 20 fps (ten times real time)
+    video: bool = False
+    video_size: tuple[int, int] = (640, 400)
+    video_frames_per_sim_s: float = 2.0
+    video_playback_fps: float = 20.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.duration_s) and self.duration_s > 0):
@@ -130,6 +138,10 @@ class MissionParams:
             raise ValueError(f"pose source must be one of {POSE_SOURCES}, got {self.pose_source!r}")
         if not (self.frame_rate_hz > 0 and self.dwell_s >= 0 and self.task_timeout_s > 0):
             raise ValueError("frame_rate_hz and task_timeout_s must be positive, dwell_s >= 0")
+        if self.video and not (
+            min(self.video_size) >= 16 and self.video_frames_per_sim_s > 0 and self.video_playback_fps > 0
+        ):
+            raise ValueError("a video needs a size of at least 16 x 16 and positive frame rates")
 
 
 @dataclass
@@ -158,6 +170,7 @@ class _Robot:
     last_fix_s: float = 0.0
     lost: bool = False
     launch: tuple[np.ndarray, float] | None = None  # a joining robot's parking pose (position, yaw)
+    last_left: np.ndarray | None = None  # the latest left image, for the video's inset
 
     @property
     def active(self) -> bool:
@@ -254,6 +267,9 @@ class Mission:
             ("physics", "rendering", "perception", "discovery", "allocation", "control"), 0.0
         )
         self.captured: list[np.ndarray] = []  # the true camera viewpoints where images were captured
+        self.video = MissionVideo(self, params) if params.video else None
+        # what the captured views have inspected so far (occlusion on), for the progress bar and snapshots
+        self.seen = SeenVoxels(CoverageModel.from_tank(self.scenario.tank, CoverageParams(occlusion=True)))
 
     # ----- helpers ------------------------------------------------------------------------------
     def _limits(self) -> MotionLimits:
@@ -326,12 +342,13 @@ class Mission:
         return keep & inside
 
     # ----- the loop -------------------------------------------------------------------------------
-    def run(self, progress: Callable[[float, int, int, float], None] | None = None) -> dict:
-        """Fly the mission; returns the final ``mission.json`` document."""
+    def run(self, progress: Callable[[float, int, int, float, float], None] | None = None) -> dict:
+        """Fly the mission; returns the final ``mission.json`` document. ``progress(now_s, found, done,
+        duration_s, inspected_pct)`` is called once a simulated second."""
         p = self.params
         period = self.scenario.control_period_s
         frame_every = 1.0 / p.frame_rate_hz
-        next_frame, next_snapshot = 0.0, p.snapshot_every_s
+        next_frame, next_snapshot, next_check = 0.0, p.snapshot_every_s, 0.0
         events = sorted(p.events, key=lambda e: e.time_s)
         wall_start = time.perf_counter()
         for robot in self.robots.values():
@@ -371,20 +388,30 @@ class Mission:
                 if robot.active and now >= robot.next_frame_s - 1e-9:
                     robot.next_frame_s += robot.frame_every_s
                     self._see(robot, now)
+            if self.video is not None:
+                start = time.perf_counter()
+                self.video.frame_due(now)
+                self.timing["rendering"] += time.perf_counter() - start
             if now >= next_frame - 1e-9:
                 next_frame += frame_every
                 self.writer.trajectory(now, {r.name: self._poses(r) for r in self.robots.values()})
             if now >= next_snapshot:
                 next_snapshot += p.snapshot_every_s
                 self.writer.snapshot(self.document(now, time.perf_counter() - wall_start, finished=False))
-            if progress is not None:
-                done = sum(1 for t in self.tasks.values() if t["completed"])
-                progress(now, len(self.tasks), done, p.duration_s)
-            if self._finished():
-                finished = True
-                break
+            if now >= next_check - 1e-9:  # once a second: the end, and the progress bar
+                next_check += 1.0
+                if progress is not None:
+                    done = sum(1 for t in self.tasks.values() if t["completed"])
+                    progress(now, len(self.tasks), done, p.duration_s, self.inspected_pct())
+                if self._finished():
+                    finished = True
+                    break
         self.writer.event(now, "end", finished=finished)
+        if self.video is not None:
+            self.video.close()
         document = self.document(now, time.perf_counter() - wall_start, finished=finished)
+        if self.video is not None:
+            document["video"] = {"file": self.video.path.name, "frames": self.video.frames}
         self.writer.finish(document, self.captured_views(), self.scenario.tank)
         self.sim.close()
         return document
@@ -419,6 +446,7 @@ class Mission:
     def _see(self, robot: _Robot, now: float) -> None:
         start = time.perf_counter()
         left, right = self.sim.render_stereo(robot.name)
+        robot.last_left = left
         self.timing["rendering"] += time.perf_counter() - start
         start = time.perf_counter()
         base = "truth" if self.params.pose_source == "truth" else "dr"
@@ -481,10 +509,9 @@ class Mission:
                 self.writer.event(now, "explored", robot=robot.name)
             return
         if robot.activity == "idle":
-            path = [k for k in agent.path_keys() if k not in robot.skipped and self._open(agent, k)]
-            if not path:
+            key = next((k for k in agent.path_keys() if k not in robot.skipped and agent.is_open(k)), None)
+            if key is None:
                 return
-            key = path[0]
             task = next(t for t in agent.tasks if t.key == key)
             estimate = self._estimate(robot)
             yaw = math.atan2(task.direction[1], task.direction[0])
@@ -500,7 +527,7 @@ class Mission:
             return
         if robot.activity == "fly":
             key = robot.task_key
-            if not self._open(agent, key) or key not in agent.path_keys():
+            if not agent.is_open(key) or key not in agent.path_keys():
                 robot.activity = "idle"  # done by another robot, or re-allocated
                 self.writer.event(now, "released", robot=robot.name, task=key)
                 return
@@ -522,10 +549,6 @@ class Mission:
                 robot.activity = "idle"
                 self.writer.event(now, "timeout", robot=robot.name, task=key)
 
-    def _open(self, agent, key: int) -> bool:
-        slots = agent.slots_of(np.array([key]))
-        return bool(slots[0] >= 0 and agent.z[slots[0]] != DONE)
-
     def _capture(self, robot: _Robot, key: int, now: float) -> None:
         left, _ = self.sim.render_stereo(robot.name)
         image = self.writer.image(f"task_{key}_{robot.name}.png", left)
@@ -535,6 +558,7 @@ class Mission:
         record = self.tasks.setdefault(key, {"id": key})
         record.update(completed=True, completion_time=round(now, 3), image=image, assigned_to=robot.name)
         view = np.r_[truth.position, truth.forward]
+        self.seen.look(view)
         self.writer.event(now, "done", robot=robot.name, task=key, image=image, view=view.tolist())
         robot.activity = "idle"
 
@@ -545,10 +569,14 @@ class Mission:
         if not alive or not all(r.explored for r in alive):
             return False
         views = [self.auction.agents[r.index] for r in alive]
-        known = {t.key for a in views for t in a.tasks}
-        done = {k for a in views for k, w in a.winners().items() if w == DONE}
-        skipped = set().union(*(r.skipped for r in alive))
-        return bool(known) and known <= done | skipped
+        known = np.unique(np.concatenate([a.keys for a in views]))
+        done = np.concatenate([a.keys[a.z == DONE] for a in views])
+        skipped = np.array(sorted(set().union(*(r.skipped for r in alive))), np.int64)
+        return len(known) > 0 and bool(np.isin(known, np.r_[done, skipped]).all())
+
+    def inspected_pct(self) -> float:
+        """The share of the walls' voxels the captured views have seen so far, occlusion on (%)."""
+        return 100.0 * float(self.seen.seen.mean())
 
     def captured_views(self) -> np.ndarray:
         """The true camera viewpoints ``(N, 6)`` where task images were captured."""
@@ -564,6 +592,7 @@ class Mission:
             "sim_time_s": now,
             "wall_time_s": wall_s,
             "robots": {r.name: r.activity for r in self.robots.values()},
+            "inspected_pct": self.inspected_pct(),
             "comms": {
                 "messages": stats.transmissions,
                 "bytes": stats.bytes,
@@ -577,3 +606,56 @@ class Mission:
             "tasks": sorted(self.tasks.values(), key=lambda t: t["id"]),
             "timing": dict(self.timing),
         }
+
+
+class MissionVideo:
+    """``mission.mp4``: a camera behind the team (looking at the live robots' centroid) with each robot's
+    latest left image inset and the time and task counts written on; written to ``mission.part.mp4``
+    and renamed when the mission ends, so a killed mission leaves no file that looks whole."""
+
+    def __init__(self, mission: Mission, params: MissionParams) -> None:
+        import cv2
+        import mujoco
+
+        self.mission = mission
+        self.every_s = 1.0 / params.video_frames_per_sim_s
+        self.next_s = 0.0
+        width, height = params.video_size
+        self.renderer = mujoco.Renderer(mission.sim.model, height, width)
+        self.path = mission.writer.root / "mission.mp4"
+        self.partial = self.path.with_name("mission.part.mp4")  # OpenCV picks the container by extension
+        self.writer = cv2.VideoWriter(
+            str(self.partial), cv2.VideoWriter_fourcc(*"mp4v"), params.video_playback_fps, (width, height)
+        )
+        if not self.writer.isOpened():
+            self.renderer.close()
+            raise RuntimeError("this OpenCV build cannot write MP4 (mp4v) video")
+        self.frames = 0
+
+    def frame_due(self, now: float) -> None:
+        """Write a frame if one is due at ``now``."""
+        if now < self.next_s - 1e-9:
+            return
+        import cv2
+
+        self.next_s += self.every_s
+        mission = self.mission
+        names = list(mission.robots)
+        live = [r.name for r in mission.robots.values() if r.active] or names
+        centre = np.mean([mission.sim.ground_truth(name)["position"] for name in live], axis=0)
+        blank = np.zeros((mission.intrinsics.height, mission.intrinsics.width, 3), np.uint8)
+        insets = {r.name: r.last_left if r.last_left is not None else blank for r in mission.robots.values()}
+        frame = third_person_frame(mission.sim, self.renderer, names, overview_camera(centre), insets)
+        done = sum(1 for t in mission.tasks.values() if t["completed"])
+        inspected = mission.inspected_pct()
+        text = f"t = {now:5.1f} s   tasks {done}/{len(mission.tasks)} done   {inspected:.0f} % inspected"
+        bgr = cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)
+        cv2.putText(bgr, text, (8, bgr.shape[0] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1)
+        self.writer.write(bgr)
+        self.frames += 1
+
+    def close(self) -> None:
+        """Finish the file and give it its name."""
+        self.writer.release()
+        self.renderer.close()
+        self.partial.replace(self.path)
