@@ -1,0 +1,79 @@
+"""Benchmark the closed-loop mission (issue [mission]): its real-time factor and where the wall time goes,
+against the floor it cannot beat, measured in the same process: the same Simulation stepping the same
+robots at the same control rate, each rendering its stereo pair at the mission's frame rate, with no
+perception, discovery, allocation or control.
+
+    python tests/bench/bench_mission.py [--duration S] [--seed N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+
+import numpy as np
+
+from envs.rendering import describe_renderer
+from envs.simulation import Simulation
+from maptidal.camera import StereoCameraParams
+from maptidal.mission.config import prepare_mission
+from maptidal.mission.run import Mission
+
+
+def floor_factor(scenario, params, duration_s: float) -> float:
+    """Real-time factor of bare stepping and rendering (the mission's floor)."""
+    width, height = params.image_size
+    sim = Simulation(scenario, camera=StereoCameraParams(width=width, height=height), flight_mode="stabilize")
+    sim.reset(seed=params.seed)
+    names = [r.name for r in scenario.robots]
+    commands = {name: np.zeros(6) for name in names}
+    next_frame, every = 0.0, 1.0 / params.frame_rate_hz
+    sim.render_stereo(names[0])  # the renderer's one-off start
+    start = time.perf_counter()
+    while sim.time < duration_s:
+        sim.step(commands)
+        if sim.time >= next_frame:
+            next_frame += every
+            for name in names:
+                sim.render_stereo(name)
+    factor = sim.time / (time.perf_counter() - start)
+    sim.close()
+    return factor
+
+
+def main() -> None:
+    """Print the mission's real-time factor, its timing breakdown and the ratio to the floor."""
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--duration", type=float, default=120.0, help="simulated seconds (default 120)")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    scenario, params = prepare_mission(None, duration_s=args.duration, seed=args.seed)
+    floor = floor_factor(scenario, params, args.duration)
+    with tempfile.TemporaryDirectory() as out:
+        mission = Mission(scenario, params, out)
+        renderer = describe_renderer(mission.sim.model, params.image_size[1], params.image_size[0])
+        document = mission.run()
+    timing = document["timing"]
+    wall = document["wall_time_s"]
+    print(f"renderer: {renderer}")
+    print(
+        f"default mission, {len(scenario.robots)} robots, {args.duration:.0f} s simulated, frames at "
+        f"{params.frame_rate_hz:g} Hz, {params.image_size[0]}x{params.image_size[1]}"
+    )
+    print(f"floor (stepping + stereo renders only): {floor:6.1f}x real time")
+    print(f"mission:                                {document['realtime_factor']:6.1f}x real time")
+    print(f"mission / floor: {document['realtime_factor'] / floor:.2f} (the goal is 10x real time)")
+    print("where the mission's wall time goes:")
+    for name, seconds in sorted(timing.items(), key=lambda kv: -kv[1]):
+        print(f"  {name:<11} {seconds:6.2f} s  {100 * seconds / wall:5.1f} %")
+    rest = wall - sum(timing.values())
+    print(f"  {'the loop':<11} {rest:6.2f} s  {100 * rest / wall:5.1f} %  (activities, logs, snapshots)")
+    done = sum(1 for t in document["tasks"] if t["completed"])
+    print(f"tasks found {len(document['tasks'])}, done {done}; messages {document['comms']['messages']}")
+
+
+if __name__ == "__main__":
+    main()
