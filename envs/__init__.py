@@ -11,6 +11,6 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from envs.gym import register_environments  # noqa: E402 (after the rendering defaults)
+from envs.gym import register_environments  # after the rendering defaults
 
 register_environments()

@@ -160,6 +160,7 @@ def plot_batch(rows: list[dict], path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     names = ("pct_uninspected", "tasks_found", "tasks_done", "completion_time_s", "bytes", "mad")
     figure, axes = plt.subplots(2, 3, figsize=(11, 6))
@@ -173,6 +174,7 @@ def plot_batch(rows: list[dict], path: Path) -> None:
             axis.axhspan(mean - std, mean + std, color="k", alpha=0.1, lw=0)
         axis.set_title(f"{name} ({METRICS[name]})", fontsize=9)
         axis.set_xlabel("seed", fontsize=8)
+        axis.xaxis.set_major_locator(MaxNLocator(integer=True))
         axis.tick_params(labelsize=8)
     figure.suptitle(f"Map-TIDAL missions over {len(rows)} seeds (line: mean, band: one std)")
     figure.tight_layout()
