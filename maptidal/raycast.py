@@ -94,22 +94,53 @@ class Occluders:
         )
 
     def first_hits_from(
-        self, origin: np.ndarray, directions: np.ndarray, epsilon: float = 1e-9
+        self,
+        origin: np.ndarray,
+        directions: np.ndarray,
+        epsilon: float = 1e-9,
+        within: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> np.ndarray:
-        """:func:`first_hit_distances` for rays from one ``origin`` ``(3,)``."""
+        """:func:`first_hit_distances` for rays from one ``origin`` ``(3,)``.
+
+        ``within``: a box (low, high corners) that holds every ray's stretch of interest; triangles whose
+        bounding box misses it are left out, so a hit outside the box may be missed (reported as inf).
+        """
         directions = np.asarray(directions, float).reshape(-1, 3)
         hits = np.full(len(directions), np.inf)
-        n_triangles = len(self.triangles)
-        if len(directions) == 0 or n_triangles == 0:
+        if len(directions) == 0 or len(self.triangles) == 0:
             return hits
         o = np.asarray(origin, float).reshape(3)
+        normal, e2_x_v0, v0_x_e1, t_offset, edges = (
+            self.normal,
+            self.e2_x_v0,
+            self.v0_x_e1,
+            self.t_offset,
+            self._edges,
+        )
+        if within is not None:
+            low, high = within
+            meets = np.flatnonzero(np.all(self._box_low <= high, 1) & np.all(self._box_high >= low, 1))
+            if len(meets) == 0:
+                return hits
+            normal, e2_x_v0, v0_x_e1, t_offset = (
+                normal[meets],
+                e2_x_v0[meets],
+                v0_x_e1[meets],
+                t_offset[meets],
+            )
+            edges = edges[np.concatenate((meets, meets + len(self.triangles)))]
+        n_triangles = len(normal)
         # a x o for rows a is a @ skew: the cross products with the origin in one 3 x 3 product
         skew = np.array([[0.0, -o[2], o[1]], [o[2], 0.0, -o[0]], [-o[1], o[0], 0.0]])
-        crossed = self._edges @ skew  # (e2 x o; e1 x o)
-        basis = self._basis  # reused between calls (one caller at a time: not for threads)
-        basis[:, n_triangles : 2 * n_triangles] = (crossed[:n_triangles] - self.e2_x_v0).T
-        basis[:, 2 * n_triangles :] = (-crossed[n_triangles:] - self.v0_x_e1).T
-        t_numerator = -(self.normal @ o) - self.t_offset
+        crossed = edges @ skew  # (e2 x o; e1 x o)
+        if n_triangles == len(self.triangles):
+            basis = self._basis  # reused between calls (one caller at a time: not for threads)
+        else:
+            basis = np.empty((3, 3 * n_triangles))
+            basis[:, :n_triangles] = normal.T
+        basis[:, n_triangles : 2 * n_triangles] = (crossed[:n_triangles] - e2_x_v0).T
+        basis[:, 2 * n_triangles :] = (-crossed[n_triangles:] - v0_x_e1).T
+        t_numerator = -(normal @ o) - t_offset
         step = max(1, _CHUNK_PAIRS // n_triangles)
         for start in range(0, len(directions), step):
             products = directions[start : start + step] @ basis
@@ -122,6 +153,14 @@ class Occluders:
             valid = (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > epsilon) & ~parallel
             hits[start : start + step] = np.where(valid, t, np.inf).min(axis=1)
         return hits
+
+    @functools.cached_property
+    def _box_low(self) -> np.ndarray:
+        return self.triangles.min(axis=1)
+
+    @functools.cached_property
+    def _box_high(self) -> np.ndarray:
+        return self.triangles.max(axis=1)
 
     @functools.cached_property
     def _edges(self) -> np.ndarray:
@@ -153,8 +192,14 @@ def visible_from(
     at about their own distance.
     """
     points = np.asarray(points, float).reshape(-1, 3)
-    offsets = points - np.asarray(viewpoint, float)[:3]
+    origin = np.asarray(viewpoint, float)[:3]
+    offsets = points - origin
     distances = np.linalg.norm(offsets, axis=1)
     safe = np.where(distances > 0.0, distances, 1.0)
-    hits = first_hit_distances_from(np.asarray(viewpoint, float)[:3], offsets / safe[:, None], triangles)
+    occluders = triangles if isinstance(triangles, Occluders) else Occluders.of(triangles)
+    if len(points) == 0:
+        return np.zeros(0, bool)
+    # only what lies between the origin and the points can block: the box around them holds every segment
+    box = (np.minimum(points.min(0), origin), np.maximum(points.max(0), origin))
+    hits = occluders.first_hits_from(origin, offsets / safe[:, None], within=box)
     return hits >= distances - tolerance

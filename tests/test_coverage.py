@@ -184,6 +184,24 @@ def test_shared_origin_first_hit_agrees_with_brute_force(seed):
         assert ours[ray] == pytest.approx(expected, abs=1e-7)
 
 
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 10_000))
+def test_visible_from_agrees_with_brute_force_in_a_cluttered_scene(seed):
+    """visible_from leaves out triangles whose bounding box misses the box around the origin and the
+    points; against the brute-force first hit over every triangle, per point."""
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(-2, 2, size=(30, 1, 3))
+    triangles = centres + rng.normal(scale=0.4, size=(30, 3, 3))  # small scattered triangles
+    origin = rng.uniform(-1, 1, size=3)
+    points = origin + rng.normal(scale=rng.uniform(0.2, 2.0), size=(40, 3))
+    tolerance = 0.01
+    ours = visible_from(np.r_[origin, 1.0, 0.0, 0.0], points, triangles, tolerance)
+    for k, point in enumerate(points):
+        distance = float(np.linalg.norm(point - origin))
+        hit = _brute_force_first_hit(origin, (point - origin) / distance, triangles)
+        assert ours[k] == (hit >= distance - tolerance), k
+
+
 def test_occlusion_blocks_voxels_behind_a_wall():
     voxels = voxel_centres(_wall(1.0), 0.05)
     viewpoint = np.array([[-1.5, 0, 0, 1, 0, 0]])

@@ -74,6 +74,9 @@ class EnvOptions:
         return cls(**options)
 
 
+_ZERO3 = np.zeros(3)
+
+
 def _has_display() -> bool:
     # MuJoCo's viewer needs a window system; without one GLFW would abort the process
     return sys.platform != "linux" or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
@@ -184,7 +187,8 @@ class MapTidalEnv(gymnasium.Env):
         for _ in range(self.substeps):
             self._before_substep()
             self.sim.step({self.robot: a}, mode=mode)
-            energy += float(np.mean(self.sim.thruster_outputs(self.robot) ** 2))
+            outputs = self.sim.thruster_outputs(self.robot)
+            energy += float(outputs @ outputs) / len(outputs)  # the mean squared command
         self._energy = energy / self.substeps
         self._steps += 1
 
@@ -212,11 +216,12 @@ class MapTidalEnv(gymnasium.Env):
         e = self._estimate
         imu = self._readings.get("imu", {})
         depth = self._readings.get("depth", {})
+        # np.concatenate, not np.r_: the observation is built every step, and np.r_ costs 15 us a call
         values = {
-            "pose": np.r_[e.position, e.rpy],
-            "velocity": np.r_[e.velocity_body, e.angular_velocity_body],
+            "pose": np.concatenate((e.position, e.rpy)),
+            "velocity": np.concatenate((e.velocity_body, e.angular_velocity_body)),
             "depth": np.array([depth.get("depth_m", 0.0)]),
-            "imu": np.r_[imu.get("accel", np.zeros(3)), imu.get("gyro", np.zeros(3))],
+            "imu": np.concatenate((imu.get("accel", _ZERO3), imu.get("gyro", _ZERO3))),
         }
         values.update(self._task_observation())
         observation = {key: np.asarray(value, np.float32) for key, value in values.items()}

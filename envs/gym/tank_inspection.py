@@ -21,9 +21,9 @@ def camera_viewpoint(truth: dict, camera_position) -> np.ndarray:
     matrix = np.zeros(9)
     mujoco.mju_quat2Mat(matrix, np.asarray(truth["quaternion"], float))
     rotation = matrix.reshape(3, 3)
-    return np.r_[
-        np.asarray(truth["position"]) + rotation @ np.asarray(camera_position, float), rotation[:, 0]
-    ]
+    return np.concatenate(
+        (np.asarray(truth["position"]) + rotation @ np.asarray(camera_position, float), rotation[:, 0])
+    )
 
 
 class WallCoverage:
@@ -38,6 +38,7 @@ class WallCoverage:
         self._sector = np.clip(np.searchsorted(edges, bearings, side="right") - 1, 0, SECTORS - 1)
         self._sector_size = np.maximum(np.bincount(self._sector, minlength=SECTORS), 1)
         self._tracker = SeenVoxels(self.model)  # rays only to voxels not yet seen
+        self._summary: np.ndarray | None = None
 
     @property
     def seen(self) -> np.ndarray:
@@ -47,15 +48,21 @@ class WallCoverage:
     def reset(self) -> None:
         """Nothing seen."""
         self._tracker.reset()
+        self._summary: np.ndarray | None = None
 
     def look(self, viewpoints: np.ndarray) -> int:
         """Count what the viewpoints ``(N, 6)`` see; the number of voxels newly seen."""
-        return self._tracker.look(viewpoints)
+        newly = self._tracker.look(viewpoints)
+        if newly:
+            self._summary = None
+        return newly
 
     def summary(self) -> np.ndarray:
-        """``(1 + SECTORS,)``: the share seen overall, then per sector."""
-        per_sector = np.bincount(self._sector[self.seen], minlength=SECTORS) / self._sector_size
-        return np.r_[self.seen.mean(), per_sector]
+        """``(1 + SECTORS,)``: the share seen overall, then per sector (recounted only after news)."""
+        if self._summary is None:
+            per_sector = np.bincount(self._sector[self.seen], minlength=SECTORS) / self._sector_size
+            self._summary = np.r_[self.seen.mean(), per_sector]
+        return self._summary.copy()
 
 
 class TankInspectionEnv(MapTidalEnv):
