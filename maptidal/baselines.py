@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -26,9 +26,18 @@ def strip_to_viewpoints(tank: TankModel, s: np.ndarray, z: np.ndarray, standoff:
     return np.hstack([points + standoff * normals, -normals])
 
 
+VORONOI_LAYOUTS = ("lloyd", "generator")
+
+
 @dataclass(frozen=True)
 class VoronoiParams:
-    """Lloyd relaxation on the unrolled strip (paper: 20 seeds with wall avoidance)."""
+    """The Voronoi layout on the unrolled strip (paper: 20 seeds with wall avoidance).
+
+    ``layout="lloyd"`` relaxes random seeds until they stop moving (a centroidal Voronoi tessellation).
+    ``layout="generator"`` reads the paper's tool as a seed generator: the paper made its points with
+    WebSVG's Voronoi editor, whose generator "controls the spread and regularity", not a converged
+    relaxation. Seeds start on a jittered grid over the strip (``regularity`` 1: cell centres; 0: anywhere
+    in their cell) and take ``lloyd_steps`` Lloyd steps. Both keep seeds ``margin_m`` inside the edges."""
 
     n_seeds: int = 20
     margin_m: float = 0.25  # wall avoidance: seeds stay this far inside the strip's edges
@@ -37,12 +46,19 @@ class VoronoiParams:
     sample_step_m: float = 0.02  # density samples for the cell centroids
     standoff_m: float = 1.0
     seed: int = 0
+    layout: str = "lloyd"
+    regularity: float = 0.5  # generator: 1 a regular grid, 0 uniform within each grid cell
+    lloyd_steps: int = 2  # generator: relaxation steps after the jittered grid
 
     def __post_init__(self) -> None:
         if self.n_seeds < 1:
             raise ValueError(f"n_seeds must be >= 1, got {self.n_seeds}")
         if not (self.margin_m >= 0.0 and self.tolerance_m > 0.0 and self.sample_step_m > 0.0):
             raise ValueError("margin_m must be >= 0, tolerance_m and sample_step_m > 0")
+        if self.layout not in VORONOI_LAYOUTS:
+            raise ValueError(f"layout must be one of {VORONOI_LAYOUTS}, got {self.layout!r}")
+        if not (0.0 <= self.regularity <= 1.0 and self.lloyd_steps >= 0):
+            raise ValueError("regularity must be in [0, 1] and lloyd_steps >= 0")
 
 
 @dataclass
@@ -90,9 +106,11 @@ def lloyd_relaxation(
     rng = np.random.default_rng(params.seed)
     seeds = rng.uniform(low, high, size=(params.n_seeds, 2)) if initial is None else np.array(initial, float)
     samples = strip_samples(length, height, params.sample_step_m)
-    energies = [quantisation_energy(samples, seeds)]
+    energies: list[float] = []
     for iteration in range(1, params.max_iterations + 1):
-        _, owner = cKDTree(seeds).query(samples)
+        # one nearest-seed query per iteration gives both the cells and the energy of the seeds as they are
+        distances, owner = cKDTree(seeds).query(samples)
+        energies.append(float(np.mean(distances**2)))
         counts = np.bincount(owner, minlength=len(seeds))
         sums = np.stack(
             [np.bincount(owner, weights=samples[:, k], minlength=len(seeds)) for k in range(2)], 1
@@ -101,17 +119,49 @@ def lloyd_relaxation(
         moved = np.clip(centroids, low, high)
         shift = float(np.max(np.linalg.norm(moved - seeds, axis=1)))
         seeds = moved
-        energies.append(quantisation_energy(samples, seeds))
         if shift < params.tolerance_m:
-            return LloydResult(seeds, energies, iteration, True)
-    return LloydResult(seeds, energies, params.max_iterations, False)
+            return LloydResult(seeds, [*energies, quantisation_energy(samples, seeds)], iteration, True)
+    return LloydResult(seeds, [*energies, quantisation_energy(samples, seeds)], params.max_iterations, False)
+
+
+def jittered_grid_seeds(length: float, height: float, params: VoronoiParams) -> np.ndarray:
+    """``params.n_seeds`` seeds ``(N, 2)`` on a jittered grid over the margin box: the grid has about
+    square cells (columns / rows as the box's aspect), surplus cells are dropped at random, and each seed
+    sits at its cell's centre plus ``(1 - regularity)`` of a uniform offset within the cell."""
+    rng = np.random.default_rng(params.seed)
+    low = np.array([params.margin_m, params.margin_m])
+    size = np.array([length, height]) - 2 * params.margin_m
+    if np.any(size < 0):
+        raise ValueError(f"a margin of {params.margin_m} m leaves no room on a {length} x {height} m strip")
+    n = params.n_seeds
+    columns = max(1, round(math.sqrt(n * size[0] / max(size[1], 1e-9))))
+    rows = math.ceil(n / columns)
+    cells = np.array([(c, r) for r in range(rows) for c in range(columns)], float)
+    cells = cells[np.sort(rng.choice(len(cells), n, replace=False))]
+    cell = size / np.array([columns, rows])
+    jitter = (1.0 - params.regularity) * rng.uniform(-0.5, 0.5, size=(n, 2))
+    return low + (cells + 0.5 + jitter) * cell
+
+
+def voronoi_seeds(length: float, height: float, params: VoronoiParams | None = None) -> np.ndarray:
+    """The Voronoi layout's seeds ``(N, 2)`` on a ``length x height`` strip (:class:`VoronoiParams`)."""
+    params = params or VoronoiParams()
+    if params.layout == "lloyd":
+        return lloyd_relaxation(length, height, params).seeds
+    start = jittered_grid_seeds(length, height, params)
+    if params.lloyd_steps == 0:
+        return start
+    stepped = replace(params, max_iterations=params.lloyd_steps, tolerance_m=1e-12)
+    return lloyd_relaxation(length, height, stepped, initial=start).seeds
 
 
 def voronoi_viewpoints(tank: TankModel, params: VoronoiParams | None = None) -> np.ndarray:
-    """Voronoi baseline: relaxed seeds on the strip, mapped to viewpoints ``(N, 6)``."""
+    """Voronoi baseline: the layout's seeds on the strip of the tank's baseline geometry
+    (:meth:`maptidal.tank.TankModel.baseline_geometry`), mapped to viewpoints ``(N, 6)``."""
     params = params or VoronoiParams()
-    result = lloyd_relaxation(tank.strip_length, tank.height, params)
-    return strip_to_viewpoints(tank, result.seeds[:, 0], result.seeds[:, 1], params.standoff_m)
+    tank = tank.baseline_geometry()
+    seeds = voronoi_seeds(tank.strip_length, tank.height, params)
+    return strip_to_viewpoints(tank, seeds[:, 0], seeds[:, 1], params.standoff_m)
 
 
 @dataclass(frozen=True)
@@ -158,8 +208,10 @@ def lane_positions(tank: TankModel, params: BoustrophedonParams) -> np.ndarray:
 
 
 def boustrophedon_viewpoints(tank: TankModel, params: BoustrophedonParams | None = None) -> np.ndarray:
-    """Boustrophedon baseline: lanes swept alternately left-right, as viewpoints ``(N, 6)``."""
+    """Boustrophedon baseline: lanes swept alternately left-right over the strip of the tank's baseline
+    geometry, as viewpoints ``(N, 6)``."""
     params = params or BoustrophedonParams()
+    tank = tank.baseline_geometry()
     along = lane_positions(tank, params)
     s, z = [], []
     for lane, height in enumerate(lane_heights(tank.height, params)):

@@ -17,7 +17,12 @@ from maptidal.coverage import CoverageReport
 from maptidal.files import atomic_write_bytes
 from maptidal.tank import TankModel
 
-METHOD_COLOURS = {"maptidal": "tab:green", "voronoi": "tab:blue", "boustrophedon": "tab:orange"}
+METHOD_COLOURS = {
+    "maptidal": "tab:green",
+    "voronoi": "tab:blue",
+    "voronoi_generator": "tab:cyan",
+    "boustrophedon": "tab:orange",
+}
 
 
 def _save(figure, path: str | os.PathLike) -> None:

@@ -18,6 +18,7 @@ the end wall (the wall lies in ``x = 0``), y to the left when facing it, z up.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -80,6 +81,11 @@ class TankConfig:
     angled_angle_deg: float = 45.0
     side_length: float = 6.0
     side_evaluated_length: float = 0.5
+    # the part of each side wall in the geometry the baselines lay their points on (None: all of the
+    # evaluated part). The paper's Fig. 6A draws the two apart: "solid lines show geometry used to
+    # generate inspection points for Voronoi and sweeping pattern methods, dashed lines show the edges
+    # of the voxelized region used to evaluate method effectiveness".
+    side_baseline_length: float | None = None
     window: WindowConfig = field(default_factory=WindowConfig)
     ladder: LadderConfig = field(default_factory=LadderConfig)
     fouling: tuple[FoulingPatch, ...] = ()
@@ -110,6 +116,13 @@ def _validate(config: TankConfig) -> None:
         isinstance(config.angled_angle_deg, int | float) and 0.0 < config.angled_angle_deg <= 90.0,
         f"angled_walls.angle_deg must be in (0, 90], got {config.angled_angle_deg!r}",
     )
+    if config.side_baseline_length is not None:
+        _finite("side_walls.baseline_length", config.side_baseline_length)
+        _require(
+            config.side_baseline_length <= config.side_evaluated_length,
+            f"side_walls.baseline_length ({config.side_baseline_length}) exceeds "
+            f"side_walls.evaluated_length ({config.side_evaluated_length})",
+        )
     _require(
         config.side_evaluated_length <= config.side_length,
         f"side_walls.evaluated_length ({config.side_evaluated_length}) exceeds side_walls.length "
@@ -196,7 +209,7 @@ def tank_config_from_dict(document: dict) -> TankConfig:
     for table, where, allowed in (
         (end_wall, "end_wall", {"width"}),
         (angled, "angled_walls", {"length", "angle_deg"}),
-        (side, "side_walls", {"length", "evaluated_length"}),
+        (side, "side_walls", {"length", "evaluated_length", "baseline_length"}),
     ):
         for key in table:
             _require(key in allowed, f"unknown key {key!r} in [{where}]")
@@ -212,6 +225,7 @@ def tank_config_from_dict(document: dict) -> TankConfig:
             angled_angle_deg=angled.get("angle_deg", defaults.angled_angle_deg),
             side_length=side.get("length", defaults.side_length),
             side_evaluated_length=side.get("evaluated_length", defaults.side_evaluated_length),
+            side_baseline_length=side.get("baseline_length"),
             window=_build(WindowConfig, _section(document, "window"), "window"),
             ladder=_build(LadderConfig, _section(document, "ladder"), "ladder"),
             fouling=tuple(_build(FoulingPatch, patch, "fouling") for patch in fouling),
@@ -315,6 +329,19 @@ class TankModel:
                 segments.append(WallSegment(name, start, end, s))
                 s += length
         return segments
+
+    def baseline_geometry(self) -> TankModel:
+        """The tank the baselines lay their points on: this one, with each side wall's part cut to
+        ``side_baseline_length`` where that is set (the paper's Fig. 6A: generation geometry and
+        evaluated region differ)."""
+        length = self.config.side_baseline_length
+        if length is None or length == self.config.side_evaluated_length:
+            return self
+        return TankModel(
+            dataclasses.replace(
+                self.config, side_evaluated_length=length, side_baseline_length=None, fouling=()
+            )
+        )
 
     def segment(self, name: str) -> WallSegment:
         """The wall segment called ``name`` (side_left, angled_left, end, ...)."""
@@ -494,3 +521,33 @@ class TankModel:
         if include_ladder:
             triangles += [_box_triangles(*box) for box in self.ladder_boxes()]
         return np.concatenate(triangles, axis=0)
+
+
+def tank_toml(document: dict, header: str = "") -> str:
+    """A tank document (as :func:`tank_config_from_dict` takes it) as TOML text: top-level values, then
+    one table per section and ``[[fouling]]`` entries; ``header`` lines become comments at the top.
+    Reading the text back with tomllib gives the same document."""
+
+    def value(item) -> str:
+        if isinstance(item, bool):
+            return "true" if item else "false"
+        if isinstance(item, int | float):
+            return repr(float(item)) if isinstance(item, float) else str(item)
+        if isinstance(item, str):
+            return '"' + item.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        raise TypeError(f"a tank document holds numbers, booleans and strings, not {item!r}")
+
+    lines = [f"# {line}" if line else "#" for line in header.splitlines()]
+    if lines:
+        lines.append("")
+    tables = {k: v for k, v in document.items() if isinstance(v, dict)}
+    arrays = {k: v for k, v in document.items() if isinstance(v, list)}
+    for key, item in document.items():
+        if key not in tables and key not in arrays:
+            lines.append(f"{key} = {value(item)}")
+    for key, table in tables.items():
+        lines += ["", f"[{key}]", *(f"{k} = {value(v)}" for k, v in table.items())]
+    for key, entries in arrays.items():
+        for entry in entries:
+            lines += ["", f"[[{key}]]", *(f"{k} = {value(v)}" for k, v in entry.items())]
+    return "\n".join(lines) + "\n"

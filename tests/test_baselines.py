@@ -113,3 +113,35 @@ def test_baselines_follow_another_tank():
     assert len(lane_heights(3.0, BoustrophedonParams())) == 4
     _check_viewpoints_look_at_the_wall(tank, viewpoints)
     _check_viewpoints_look_at_the_wall(tank, voronoi_viewpoints(tank))
+
+
+def test_the_seed_generator_spreads_seeds_on_a_jittered_grid():
+    """The generator reading of the paper's Voronoi tool: a regular grid at regularity 1 without Lloyd
+    steps (cell centres), every seed inside the wall-avoidance margin, and Lloyd steps lowering the
+    quantisation energy from the jittered start."""
+    from maptidal.baselines import (
+        VoronoiParams,
+        jittered_grid_seeds,
+        quantisation_energy,
+        strip_samples,
+        voronoi_seeds,
+    )
+
+    regular = jittered_grid_seeds(5.4, 2.0, VoronoiParams(layout="generator", regularity=1.0, lloyd_steps=0))
+    assert len(regular) == 20
+    # round(sqrt(20 x 4.9 / 1.5)) = 8 columns, ceil(20 / 8) = 3 rows of (4.9 / 8) x (1.5 / 3) m cells
+    # from (0.25, 0.25): the seeds sit on that lattice's centres, 20 of its 24 cells
+    columns = (regular[:, 0] - 0.25) / (4.9 / 8) - 0.5
+    rows = (regular[:, 1] - 0.25) / (1.5 / 3) - 0.5
+    assert np.allclose(columns, np.round(columns)) and np.allclose(rows, np.round(rows))
+    for regularity in (0.0, 0.5):
+        params = VoronoiParams(layout="generator", regularity=regularity, lloyd_steps=0, seed=3)
+        seeds = voronoi_seeds(5.4, 2.0, params)
+        assert np.all(seeds >= 0.25 - 1e-12) and np.all(seeds[:, 0] <= 5.15) and np.all(seeds[:, 1] <= 1.75)
+        samples = strip_samples(5.4, 2.0, 0.02)
+        relaxed = voronoi_seeds(
+            5.4, 2.0, VoronoiParams(layout="generator", regularity=regularity, lloyd_steps=3, seed=3)
+        )
+        assert quantisation_energy(samples, relaxed) < quantisation_energy(samples, seeds)
+    with pytest.raises(ValueError):
+        VoronoiParams(layout="websvg")

@@ -40,7 +40,7 @@ def test_discovery_over_keyframes_chains_existing_tasks():
 
 def test_compare_writes_everything_and_scores_every_method(tmp_path):
     document = run_compare(tmp_path, FAST, plots=True, progress=False)
-    assert set(document["methods"]) == {"maptidal", "voronoi", "boustrophedon"}
+    assert set(document["methods"]) == {"maptidal", "voronoi", "voronoi_generator", "boustrophedon"}
     for row in document["methods"].values():
         assert set(row) == {"tasks", "pct_uninspected", "mean_views", "mad"}
         assert 0.0 <= row["pct_uninspected"] <= 100.0 and row["mad"] >= 0.0

@@ -11,6 +11,7 @@ Subcommands:
   coverage     views per voxel of a task list on the tank model         (cli.evaluation)
   compare      Map-TIDAL against Voronoi and boustrophedon (Sec. IV.E)  (cli.evaluation)
   sweep        Map-TIDAL over a grid of t, r_ex, theta_ex (Table I)     (cli.evaluation)
+  calibrate-tank  the tank's unknown dimensions fitted to the baselines  (cli.evaluation)
   sim          step the MuJoCo world with a constant pilot command      (cli.world)
   export-mjcf  write a scenario's world as MJCF files                   (cli.world)
   allocate     decentralised CBBA allocation over an acoustic channel   (cli.allocation)

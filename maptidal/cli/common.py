@@ -243,3 +243,23 @@ def check_executor_args(args: argparse.Namespace) -> None:
     """Refuse ``--ray-address`` without ``--executor ray`` before any work."""
     if args.ray_address is not None and args.executor != "ray":
         raise ValueError("--ray-address needs --executor ray")
+
+
+def add_capture_args(parser: argparse.ArgumentParser, refinement: bool = True) -> None:
+    """``--capture paper|sweep`` (the synthetic keyframes' path) and, with ``refinement``,
+    ``--no-refinement`` (one triangulation per keyframe instead of Kimera-like landmark fusion)."""
+    parser.add_argument(
+        "--capture",
+        choices=("paper", "sweep"),
+        default="paper",
+        help="keyframes: the paper's protocol, 7 keyframes rising 0.5 m 1 m in front of the end wall "
+        "(paper, default), or two yaw sweeps from the centre line 1.5 m from it (sweep)",
+    )
+    if refinement:
+        parser.add_argument(
+            "--no-refinement",
+            dest="refinement",
+            action="store_false",
+            help="triangulate every keyframe's landmarks afresh, rather than fuse each landmark over the "
+            "frames it is tracked in as Kimera's back end does (the default)",
+        )

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from maptidal.cli.common import (
+    add_capture_args,
     add_coverage_args,
     add_discovery_params,
     add_executor_args,
@@ -18,11 +19,12 @@ from maptidal.cli.common import (
     coverage_params_from,
     discovery_params_from,
     output_dir,
+    positive_int,
 )
 
 
 def register(commands) -> None:
-    """Add the ``coverage``, ``compare`` and ``sweep`` subcommands."""
+    """Add the ``coverage``, ``compare``, ``sweep`` and ``calibrate-tank`` subcommands."""
     coverage = commands.add_parser(
         "coverage",
         help="views per voxel of a task list on the tank model",
@@ -41,18 +43,13 @@ def register(commands) -> None:
     compare = commands.add_parser(
         "compare",
         help="Map-TIDAL vs Voronoi vs boustrophedon on the tank (the paper's Sec. IV.E comparison)",
-        description="Run Map-TIDAL on synthetic exploration keyframes of the tank, and the Voronoi and "
-        "boustrophedon baselines, score all three on the same voxels, print the paper's comparison table "
+        description="Run Map-TIDAL on synthetic keyframes of the tank (the paper's capture protocol and "
+        "Kimera-like landmark refinement by default), and the Voronoi and boustrophedon baselines, "
+        "score them on the same voxels, print the paper's comparison table "
         "and write compare.json, tasks, plots and report.md.",
     )
     add_coverage_args(compare)
-    compare.add_argument(
-        "--capture",
-        choices=("sweep", "paper"),
-        default="sweep",
-        help="keyframes: two yaw sweeps from the centre line (sweep, default), or the paper's protocol, "
-        "7 keyframes rising 0.5 m 1 m in front of the end wall (paper)",
-    )
+    add_capture_args(compare)
     compare.add_argument(
         "--keyframes",
         choices=("synthetic", "rendered"),
@@ -112,12 +109,7 @@ def register(commands) -> None:
     noise.add_argument("--json", action="store_true", help="print the rows as JSON")
     add_output_folder(noise, "runs/noise_curve")
     add_coverage_args(noise)
-    noise.add_argument(
-        "--capture",
-        choices=("sweep", "paper"),
-        default="sweep",
-        help="keyframe capture path (default %(default)s)",
-    )
+    add_capture_args(noise, refinement=False)
     noise.set_defaults(handler=run_noise_curve, free_space=False)
     add_discovery_params(noise)
     sweep.add_argument("--no-plots", action="store_true", help="skip the heatmap PNG")
@@ -133,13 +125,7 @@ def register(commands) -> None:
         help='print the result as JSON ({"cells": [...], "rank_correlation": {...}} with --paper-grid)',
     )
     add_coverage_args(sweep)
-    sweep.add_argument(
-        "--capture",
-        choices=("sweep", "paper"),
-        default="sweep",
-        help="keyframes: two yaw sweeps from the centre line (sweep, default), or the paper's protocol, "
-        "7 keyframes rising 0.5 m 1 m in front of the end wall (paper)",
-    )
+    add_capture_args(sweep)
     sweep.add_argument(
         "--free-space",
         action="store_true",
@@ -148,6 +134,43 @@ def register(commands) -> None:
     )
     add_discovery_params(sweep)
     sweep.set_defaults(handler=run_sweep)
+
+    calibrate = commands.add_parser(
+        "calibrate-tank",
+        help="fit the tank's unknown dimensions to the paper's Voronoi and boustrophedon figures",
+        description="Fit the dimensions the paper leaves open (end-wall width, angled-wall length, "
+        "evaluated side-wall length, water depth, window size) so that our Voronoi and boustrophedon "
+        "baselines give the paper's tasks, % uninspected, mean views and MAD (Sec. IV.E). A grid over "
+        "the walls and the depth, then a Nelder-Mead polish; writes calibration.json, calibration.md, "
+        "calibration.png and calibrated_tank.toml to --out.",
+    )
+    calibrate.add_argument(
+        "--grid-points",
+        type=positive_int,
+        default=3,
+        metavar="N",
+        help="grid points per gridded dimension (default %(default)s: 243 tanks)",
+    )
+    calibrate.add_argument(
+        "--polish-evaluations",
+        type=positive_int,
+        default=120,
+        metavar="N",
+        help="Nelder-Mead evaluations from each of the 3 best grid points (default %(default)s)",
+    )
+    calibrate.add_argument(
+        "--fit",
+        metavar="NAME,...",
+        help="the dimensions to fit (default all: end_width, angled_length, side_evaluated, "
+        "side_baseline_share, water_depth, window_width, window_height); the others keep the default "
+        "tank's values",
+    )
+    calibrate.add_argument(
+        "--jobs", type=positive_int, default=1, metavar="N", help="local processes for the grid"
+    )
+    calibrate.add_argument("--json", action="store_true", help="print the result as JSON")
+    add_output_folder(calibrate, "runs/calibration")
+    calibrate.set_defaults(handler=run_calibrate_tank)
 
 
 def run_coverage(args: argparse.Namespace) -> int:
@@ -214,6 +237,7 @@ def run_noise_curve(args: argparse.Namespace) -> int:
 
 def _evaluation_config(args: argparse.Namespace):
     from maptidal.evaluation import EvaluationConfig
+    from maptidal.keyframes import RefinementParams
 
     discovery = discovery_params_from(args)
     return EvaluationConfig(
@@ -223,6 +247,7 @@ def _evaluation_config(args: argparse.Namespace):
         discovery=discovery,
         free_space=args.free_space,
         capture=args.capture,
+        refinement=RefinementParams(enabled=getattr(args, "refinement", True)),
     )
 
 
@@ -314,4 +339,63 @@ def run_sweep(args: argparse.Namespace) -> int:
     else:
         print(sweep_markdown(rows))
     print(f"files in {args.out}: {', '.join(files)}")
+    return 0
+
+
+def run_calibrate_tank(args: argparse.Namespace) -> int:
+    """Handler of ``maptidal calibrate-tank``."""
+    from maptidal.calibration import (
+        DIMENSIONS,
+        Calibration,
+        CalibrationParams,
+        baseline_figures,
+        calibration_markdown,
+        plot_calibration,
+        residuals,
+        tank_document,
+    )
+    from maptidal.files import atomic_write_json, atomic_write_text
+    from maptidal.progress import ProgressBar
+    from maptidal.tank import TankModel, tank_config_from_dict, tank_toml
+
+    fit = tuple(DIMENSIONS) if args.fit is None else tuple(n.strip() for n in args.fit.split(","))
+    grid = tuple(n for n in CalibrationParams().grid if n in fit)
+    params = CalibrationParams(
+        grid_points=args.grid_points, polish_evaluations=args.polish_evaluations, fit=fit, grid=grid
+    )
+    calibration = Calibration(params=params)
+    grid_size = 1
+    for _ in grid:
+        grid_size *= args.grid_points
+    total = grid_size + 3 * args.polish_evaluations
+    bar = ProgressBar(total, "calibrate", enabled=not args.json)
+    state = {"shown": 0}
+
+    def progress(evaluations: int, best: float) -> None:
+        step = min(evaluations, total) - state["shown"]
+        if step > 0:
+            bar.advance(step, f"best objective {best:.2f}")
+            state["shown"] += step
+
+    result = calibration.run(progress, jobs=min(args.jobs, os.cpu_count() or 1))
+    # the best fit's figures at compare's own settings (the fit's Lloyd samples are coarser)
+    document = tank_document(result.dimensions, calibration.base)
+    result.figures = baseline_figures(TankModel(tank_config_from_dict(document)))
+    result.residuals = residuals(result.figures)
+    out = Path(args.out)
+    base = {name: calibration.base_value(name) for name in DIMENSIONS}
+    document["name"] = "osb_tank_calibrated"
+    header = (
+        "The OSB tank with the dimensions the paper leaves open fitted to its baselines' figures\n"
+        "(maptidal calibrate-tank; the fit, its residuals and ranges: calibration.md beside this file)."
+    )
+    atomic_write_text(out / "calibrated_tank.toml", tank_toml(document, header))
+    atomic_write_json(out / "calibration.json", result.to_dict())
+    atomic_write_text(out / "calibration.md", calibration_markdown(result, base))
+    plot_calibration(result, out / "calibration.png")
+    if args.json:
+        print(json.dumps(result.to_dict()))
+        return 0
+    print(calibration_markdown(result, base))
+    print(f"files in {out}: calibrated_tank.toml, calibration.json, calibration.md, calibration.png")
     return 0
