@@ -59,9 +59,9 @@ PAPER_BASELINES = {
 SCALES = {"tasks": 1.0, "pct_uninspected": 1.0, "mean_views": 0.1, "mad": 0.01}
 # the fitted dimensions: (section, key) in the tank TOML, and the search bounds (m)
 DIMENSIONS = {
-    "end_width": (("end_wall", "width"), (1.5, 5.0)),
-    "angled_length": (("angled_walls", "length"), (0.3, 3.0)),
-    "side_evaluated": (("side_walls", "evaluated_length"), (0.2, 3.0)),
+    "end_width": (("end_wall", "width"), (1.5, 6.0)),
+    "angled_length": (("angled_walls", "length"), (0.3, 5.0)),
+    "side_evaluated": (("side_walls", "evaluated_length"), (0.2, 5.0)),
     # the part of each side wall the baselines lay points on, as a share of the evaluated part
     # (Fig. 6A draws the generation geometry and the evaluated region apart)
     "side_baseline_share": (("side_walls", "baseline_share"), (0.0, 1.0)),
@@ -344,6 +344,8 @@ def calibration_markdown(result: CalibrationResult, base: dict[str, float]) -> s
     lines = [
         "# The tank calibrated from the baselines",
         "",
+        "side_baseline_share is a share of the evaluated side-wall length, not metres.",
+        "",
         f"Objective (sum of squared scaled residuals): {result.objective:.2f}, "
         f"over {len(result.evaluations)} tanks evaluated.",
         "",
@@ -383,7 +385,7 @@ def plot_calibration(result: CalibrationResult, path) -> None:
         axis.axvline(result.dimensions[name], color="C3", lw=1.5)
         low, high = result.determined.get(name, (result.dimensions[name],) * 2)
         axis.axvspan(low, high, color="C3", alpha=0.15, lw=0)
-        axis.set_xlabel(f"{name} (m)")
+        axis.set_xlabel(f"{name} ({'share' if name.endswith('share') else 'm'})")
         axis.set_ylabel("objective")
     for axis in list(axes.flat)[len(names) :]:
         axis.set_visible(False)

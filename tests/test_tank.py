@@ -124,3 +124,32 @@ def test_config_dataclass_validates_directly():
     with pytest.raises(TankConfigError):
         TankConfig(window=WindowConfig(width=1.0, height=0.0))
     assert DEFAULT_TANK_CONFIG.is_file()
+
+
+def test_the_baselines_geometry_may_cut_the_side_walls():
+    """side_walls.baseline_length: the baselines lay their points on a shorter strip than the evaluated
+    one (the paper's Fig. 6A), and a part longer than the evaluated one is refused."""
+    from maptidal.baselines import boustrophedon_viewpoints
+    from maptidal.tank import TankConfigError, TankModel, tank_config_from_dict
+
+    document = {"water_depth": 2.0, "end_wall": {"width": 2.4}, "side_walls": {"evaluated_length": 0.5}}
+    full = TankModel(tank_config_from_dict(document))
+    document["side_walls"]["baseline_length"] = 0.0
+    cut = TankModel(tank_config_from_dict(document))
+    assert cut.strip_length == full.strip_length  # the evaluated region is the same
+    assert cut.baseline_geometry().strip_length == pytest.approx(full.strip_length - 1.0)
+    assert full.baseline_geometry() is full
+    # without the side parts a lane has 4 corners and 2 points inside the end wall: 6, times 3 lanes
+    assert len(boustrophedon_viewpoints(cut)) == 18 and len(boustrophedon_viewpoints(full)) == 24
+    document["side_walls"]["baseline_length"] = 0.6
+    with pytest.raises(TankConfigError, match="baseline_length"):
+        tank_config_from_dict(document)
+
+
+def test_the_calibrated_variant_loads():
+    from maptidal.paths import asset
+    from maptidal.tank import TankModel, load_tank_config
+
+    tank = TankModel(load_tank_config(asset("osb_tank", "calibrated.toml")))
+    assert tank.config.name == "osb_tank_calibrated"
+    assert tank.baseline_geometry().strip_length < tank.strip_length

@@ -344,6 +344,7 @@ def run_sweep(args: argparse.Namespace) -> int:
 
 def run_calibrate_tank(args: argparse.Namespace) -> int:
     """Handler of ``maptidal calibrate-tank``."""
+    from maptidal.baselines import VoronoiParams
     from maptidal.calibration import (
         DIMENSIONS,
         Calibration,
@@ -380,7 +381,8 @@ def run_calibrate_tank(args: argparse.Namespace) -> int:
     result = calibration.run(progress, jobs=min(args.jobs, os.cpu_count() or 1))
     # the best fit's figures at compare's own settings (the fit's Lloyd samples are coarser)
     document = tank_document(result.dimensions, calibration.base)
-    result.figures = baseline_figures(TankModel(tank_config_from_dict(document)))
+    final = CalibrationParams(voronoi=VoronoiParams())  # Lloyd on compare's 2 cm samples
+    result.figures = baseline_figures(TankModel(tank_config_from_dict(document)), final)
     result.residuals = residuals(result.figures)
     out = Path(args.out)
     base = {name: calibration.base_value(name) for name in DIMENSIONS}
