@@ -17,7 +17,7 @@ from envs.water import WaterParams
 from maptidal.coverage import CoverageModel
 from maptidal.evaluation import EvaluationConfig, config_keyframes, discover_over_keyframes
 from maptidal.frame_discovery import discover_on_recording
-from maptidal.keyframes import tank_edges
+from maptidal.keyframes import RefinementParams, tank_edges
 from maptidal.mission.capture import CaptureParams, capture
 from maptidal.perception.frontend import FrontEndParams
 from maptidal.perception.landmarks import FusionParams
@@ -120,7 +120,9 @@ def test_each_pose_source_tracks_the_ground_truth(clear_recording, truth_run):
 
 def test_rendered_discovery_is_close_to_the_synthetic_pipeline_on_the_same_path(truth_run):
     tank = TankModel(load_tank_config(None))
-    config = EvaluationConfig(capture="paper")
+    # against the synthetic keyframes without landmark refinement, the comparison the tolerance below was
+    # set on (README, "Rendered against synthetic"); the refined ones give fewer tasks (46 against 52-59)
+    config = EvaluationConfig(capture="paper", refinement=RefinementParams(enabled=False))
     synthetic = discover_over_keyframes(config_keyframes(tank, config), config.discovery)
     model = CoverageModel.from_tank(tank, config.coverage)
     rendered_report, _ = model.evaluate(truth_run.tasks)

@@ -93,6 +93,6 @@ def test_wheel_installed_in_a_fresh_venv_runs_compare_and_sim(tmp_path):
     ).stdout.split()
     assert all(line.startswith(str(site)) for line in where), where
     compare = maptidal("compare", "--no-write", "--json")
-    assert set(compare["methods"]) == {"maptidal", "voronoi", "boustrophedon"}
+    assert set(compare["methods"]) == {"maptidal", "voronoi", "voronoi_generator", "boustrophedon"}
     sim = maptidal("sim", "--duration", "0.2", "--json")
     assert set(sim["robots"]) == {"rov0"}
