@@ -545,3 +545,25 @@ def test_a_task_only_a_failed_robot_knew_is_reported_lost_not_unassigned():
     _, report = run(robots, tasks, ChannelParams(), events=sorted(events, key=lambda e: e.kind))
     assert report.lost == [secret.key]
     assert report.unassigned == [] and report.conflicts == 0
+
+
+@pytest.mark.parametrize("seed", [3, 8, 21])
+def test_a_task_given_up_passes_to_another_robot_as_if_its_holder_could_not_do_it(seed):
+    """give_up: robot 0 stops bidding on the first task of its path mid-mission. The team settles on the
+    allocation the sequential greedy gives when that task needs a tool robot 0 lacks, and robot 0 never
+    takes the task again."""
+    robots, tasks = random_instance(3, 12, seed)
+    simulation = AuctionSimulation(robots, tasks, IDEAL, AuctionParams())
+    simulation.advance_to(400.0)
+    quitter = simulation.agents[0]
+    key = quitter.path_keys()[0]
+    assert quitter.give_up(key, 400.0) and not quitter.give_up(key, 401.0)
+    simulation.advance_to(1200.0)
+    report = simulation.report(converged=True)
+    assert report.conflicts == 0 and report.disagreements == 0
+    assert key not in report.paths[0] and any(key in path for path in report.paths.values())
+    # the reference: the same team, with the given-up task needing a tool only robots 1 and 2 carry
+    tool = capability_mask(["camera", "tool"])
+    equipped = [replace(r, capabilities=tool) if r.index else r for r in robots]
+    changed = [replace(t, requires=tool) if t.key == key else t for t in tasks]
+    assert report.paths == sequential_greedy(equipped, changed, AuctionParams()).paths

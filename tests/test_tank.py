@@ -152,4 +152,5 @@ def test_the_calibrated_variant_loads():
 
     tank = TankModel(load_tank_config(asset("osb_tank", "calibrated.toml")))
     assert tank.config.name == "osb_tank_calibrated"
-    assert tank.baseline_geometry().strip_length < tank.strip_length
+    assert tank.strip_length > TankModel(load_tank_config(None)).strip_length  # the fit's larger region
+    assert tank.baseline_geometry().strip_length <= tank.strip_length

@@ -230,6 +230,25 @@ class CBBAAgent:
         self.last_change_s = now_s
         return True
 
+    def give_up(self, key: int, now_s: float) -> bool:
+        """Stop bidding on task ``key`` for good: this robot found it cannot do it (it tried, and timed
+        out). If it holds the task it releases it, with every later bundle entry (their marginal bids
+        assumed it, as when a robot is outbid), and the release spreads like any lost bid, so another
+        robot can win it. Returns False when the task is unknown or already given up."""
+        slot = self._slot_of.get(key)
+        if slot is None or not self._feasible[slot]:
+            return False
+        self._feasible[slot] = False
+        if slot in self.bundle:
+            released = self.bundle[self.bundle.index(slot) :]
+            mine = [j for j in released if self.z[j] == self.index]  # not those another robot holds now
+            if mine:
+                self._set(np.array(mine), NO_WINNER, 0.0)
+            self._drop_from_bundle(set(released))
+            self._bids_lowered = True
+        self.last_change_s = now_s
+        return True
+
     def set_position(self, position) -> None:
         """Move the start of the path (the robot's current position) for future bids."""
         self.robot.position = np.asarray(position, dtype=float)

@@ -14,7 +14,9 @@ the acoustic channel, in TDMA slots, in step with the physics. A robot explores 
 it starts), then flies the first task on its CBBA path, holds it for ``dwell_s`` within the controller's
 tolerances, captures an image and marks the task done, which spreads over the channel too.
 
-The mission ends when every robot has explored and every reachable task is done, or at ``duration_s``.
+A robot that times out on a task gives it up (:meth:`maptidal.allocation.agent.CBBAAgent.give_up`): it
+leaves its bundle, so a teammate can win it. The mission ends when every robot has explored and every
+task is done or given up by every live robot, or at ``duration_s``.
 Scripted events: a robot failing (it stops and falls silent; CBBA releases its tasks after the agents'
 failure timeout) and a current. Outputs go to the output folder as the mission runs
 (:mod:`maptidal.mission.outputs`).
@@ -546,6 +548,7 @@ class Mission:
                 robot.within_since_s = None
             if now - robot.task_started_s > self.params.task_timeout_s:
                 robot.skipped.add(key)
+                agent.give_up(key, now)  # it leaves this robot's bundle, so a teammate can win it
                 robot.activity = "idle"
                 self.writer.event(now, "timeout", robot=robot.name, task=key)
 
@@ -571,7 +574,8 @@ class Mission:
         views = [self.auction.agents[r.index] for r in alive]
         known = np.unique(np.concatenate([a.keys for a in views]))
         done = np.concatenate([a.keys[a.z == DONE] for a in views])
-        skipped = np.array(sorted(set().union(*(r.skipped for r in alive))), np.int64)
+        # a task is out of the team's reach when every live robot has tried it and given up
+        skipped = np.array(sorted(set.intersection(*(r.skipped for r in alive))), np.int64)
         return len(known) > 0 and bool(np.isin(known, np.r_[done, skipped]).all())
 
     def inspected_pct(self) -> float:
