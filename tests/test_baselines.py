@@ -145,3 +145,19 @@ def test_the_seed_generator_spreads_seeds_on_a_jittered_grid():
         assert quantisation_energy(samples, relaxed) < quantisation_energy(samples, seeds)
     with pytest.raises(ValueError):
         VoronoiParams(layout="websvg")
+
+
+def test_a_fully_jittered_seed_stays_in_its_own_cell():
+    """At regularity 0 each seed lies anywhere in its grid cell, never in a neighbour's: one seed per
+    cell of the 8 x 3 lattice, and together they spread over more than a regular grid's offsets."""
+    from maptidal.baselines import VoronoiParams, jittered_grid_seeds
+
+    for seed in range(5):
+        params = VoronoiParams(layout="generator", regularity=0.0, lloyd_steps=0, seed=seed)
+        seeds = jittered_grid_seeds(5.4, 2.0, params)
+        cell = np.array([4.9 / 8, 1.5 / 3])
+        cells = np.floor((seeds - 0.25) / cell).astype(int)
+        assert len({tuple(c) for c in cells}) == 20
+        assert np.all((cells >= 0) & (cells < [8, 3]))
+        offsets = (seeds - 0.25) / cell - cells  # position within the cell, 0..1
+        assert offsets.std() > 0.2  # not the cell centres
