@@ -37,9 +37,11 @@ def third_person_frame(
     robots: list[str],
     camera: mujoco.MjvCamera | None = None,
     insets: Mapping[str, np.ndarray] | None = None,
+    labels: bool = False,
 ) -> np.ndarray:
     """The ``camera``'s view (default: :func:`follow_camera` on the first robot), with each robot's left
-    camera image inset along the top right: the images in ``insets`` where given, else rendered now."""
+    camera image inset along the top right: the images in ``insets`` where given, else rendered now;
+    with ``labels``, each inset carries its robot's name."""
     camera = camera if camera is not None else follow_camera(sim, robots[0], len(robots))
     renderer.update_scene(sim.data, camera=camera, scene_option=CAMERA_SCENE_OPTION)  # no sonar rays
     frame = renderer.render().copy()
@@ -51,5 +53,8 @@ def third_person_frame(
         if left is None:
             left, _ = sim.render_stereo(robot)
         frame[4 : 4 + size[1], right - size[0] : right] = cv2.resize(left, size, interpolation=cv2.INTER_AREA)
+        if labels:  # the robot's name in the inset's corner, for a view with several robots
+            corner = (right - size[0] + 3, 4 + size[1] - 4)
+            cv2.putText(frame, robot, corner, cv2.FONT_HERSHEY_SIMPLEX, 0.35, (255, 255, 255), 1, cv2.LINE_AA)
         right -= size[0] + 4
     return frame

@@ -173,3 +173,17 @@ def test_a_bad_mission_file_fails_before_any_run(tmp_path):
     done = run_maptidal("batch", bad, "--seeds", "1-3", "--out", tmp_path / "b")
     assert_one_line_error(done, "[mission] takes only")
     assert not (tmp_path / "b" / "seed_001").exists()
+
+
+def test_a_sweep_gives_the_same_rows_locally_and_on_ray(tmp_path, ray_cluster):
+    """sweep --executor ray: the grid cells run as Ray tasks (each worker builds its keyframes and
+    coverage model once, through the executor's initializer) and come back as the local run's rows."""
+    grid = ["--grid", "t=0.75", "r_ex=1.5,1.8", "theta_ex=0.25,0.3", "--no-plots", "--json"]
+    local = run_maptidal("sweep", *grid, "--jobs", "2", "--out", tmp_path / "local")
+    assert local.returncode == 0, local.stderr
+    on_ray = run_maptidal(
+        "sweep", *grid, "--executor", "ray", "--ray-address", ray_cluster, "--out", tmp_path / "ray"
+    )
+    assert on_ray.returncode == 0, on_ray.stderr
+    rows = json.loads(local.stdout)["rows"]
+    assert len(rows) == 4 and rows == json.loads(on_ray.stdout)["rows"]

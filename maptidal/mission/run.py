@@ -649,7 +649,9 @@ class MissionVideo:
         centre = np.mean([mission.sim.ground_truth(name)["position"] for name in live], axis=0)
         blank = np.zeros((mission.intrinsics.height, mission.intrinsics.width, 3), np.uint8)
         insets = {r.name: r.last_left if r.last_left is not None else blank for r in mission.robots.values()}
-        frame = third_person_frame(mission.sim, self.renderer, names, overview_camera(centre), insets)
+        frame = third_person_frame(
+            mission.sim, self.renderer, names, overview_camera(centre), insets, labels=True
+        )
         done = sum(1 for t in mission.tasks.values() if t["completed"])
         inspected = mission.inspected_pct()
         text = f"t = {now:5.1f} s   tasks {done}/{len(mission.tasks)} done   {inspected:.0f} % inspected"
