@@ -378,9 +378,14 @@ def test_mavproxy_connects_reads_parameters_arms_and_changes_mode(tmp_path):
                 ("mode ALT_HOLD", lambda: served.vehicle.mode == "alt_hold"),
                 ("disarm", lambda: not served.vehicle.armed),
             ):
-                process.stdin.write(line + "\n")
-                process.stdin.flush()
-                assert wait_until(condition, 10), line
+                # each command is idempotent, and MAVProxy ignores a "param set" that comes before it
+                # has loaded the parameters the vehicle finished sending: say it again until it lands
+                for _ in range(5):
+                    process.stdin.write(line + "\n")
+                    process.stdin.flush()
+                    if wait_until(condition, 2):
+                        break
+                assert condition(), line
         finally:
             process.terminate()
             output = process.communicate(timeout=10)[0]
