@@ -276,3 +276,36 @@ def test_the_progress_coverage_is_the_final_reports(short_mission):
     _, document, _ = short_mission
     uninspected = document["coverage"]["occluded"]["pct_uninspected"]
     assert document["inspected_pct"] == pytest.approx(100.0 - uninspected, abs=1e-9)
+
+
+def test_after_a_failure_the_survivor_finishes_every_task_and_the_mission_ends(tmp_path):
+    """With coarse discovery parameters (r_ex 3 m, theta_ex 1.2 rad: a handful of tasks) the whole
+    mission can finish. rov1 fails at 40 s while flying to a task; once the 40 s failure timeout has
+    passed the survivor takes that task and does it, every task is done, and the mission ends before its
+    time limit. (Both robots carry a DVL, so that the survivor can fly what it takes.)"""
+    import dataclasses
+
+    from maptidal.discovery import DiscoveryParams
+    from maptidal.mission.run import MissionEvent
+
+    scenario, _ = load_mission(None)
+    with_dvl = tuple(
+        dataclasses.replace(r, sensors=tuple(dict.fromkeys((*r.sensors, "dvl")))) for r in scenario.robots
+    )
+    scenario = dataclasses.replace(scenario, robots=with_dvl)
+    params = MissionParams(
+        duration_s=300.0,
+        seed=1,
+        discovery=DiscoveryParams(r_ex=3.0, theta_ex=1.2),
+        events=(MissionEvent(40.0, "fail", "rov1"),),
+    )
+    document = Mission(scenario, params, tmp_path).run()
+    assert document["finished"] and document["sim_time_s"] < 300.0
+    assert document["tasks"] and all(t["completed"] for t in document["tasks"])
+    events = read_events(tmp_path)
+    flying = [e for e in events if e["kind"] == "flying" and e["robot"] == "rov1" and e["t"] < 40.0]
+    done_by_rov1 = {e["task"] for e in events if e["kind"] == "done" and e["robot"] == "rov1"}
+    orphan = flying[-1]["task"]  # what rov1 was flying to when it failed
+    assert orphan not in done_by_rov1
+    taken = next(t for t in document["tasks"] if t["id"] == orphan)
+    assert taken["assigned_to"] == "rov0" and taken["completion_time"] > 40.0 + 40.0
