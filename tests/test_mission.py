@@ -135,6 +135,16 @@ def test_a_killed_mission_leaves_a_log_the_report_rebuilds(tmp_path):
             '[[mission.events]]\ntime_s = 6\nkind = "join"\nrobot = "rov1"\n',
             "at least one must start",
         ),
+        (
+            '[[mission.events]]\ntime_s = 5\nkind = "join"\nrobot = "rov1"\n'
+            '[[mission.events]]\ntime_s = 9\nkind = "join"\nrobot = "rov1"\n',
+            "joins once",
+        ),
+        (
+            '[[mission.events]]\ntime_s = 20\nkind = "join"\nrobot = "rov1"\n'
+            '[[mission.events]]\ntime_s = 10\nkind = "fail"\nrobot = "rov1"\n',
+            "before it joins",
+        ),
     ],
 )
 def test_bad_mission_files_give_one_line_and_status_2(tmp_path, mission_table, message):
