@@ -47,14 +47,12 @@ from maptidal.baselines import (
     voronoi_viewpoints,
 )
 from maptidal.coverage import CoverageModel, CoverageParams
+from maptidal.evaluation import PAPER_TABLE
 from maptidal.paths import asset
 from maptidal.tank import TankConfigError, TankModel, tank_config_from_dict
 
 # the paper, Sec. IV.E: the baselines' published figures
-PAPER_BASELINES = {
-    "voronoi": {"tasks": 20, "pct_uninspected": 17.32, "mean_views": 1.39, "mad": 0.100},
-    "boustrophedon": {"tasks": 30, "pct_uninspected": 8.94, "mean_views": 1.80, "mad": 0.081},
-}
+PAPER_BASELINES = {method: PAPER_TABLE[method] for method in ("voronoi", "boustrophedon")}
 # the resolution each residual is scaled by (module docstring)
 SCALES = {"tasks": 1.0, "pct_uninspected": 1.0, "mean_views": 0.1, "mad": 0.01}
 # the fitted dimensions: (section, key) in the tank TOML, and the search bounds (m)
@@ -162,6 +160,13 @@ def baseline_figures(tank: TankModel, params: CalibrationParams | None = None) -
             "mad": report.mad,
         }
     return figures
+
+
+def compare_figures(dimensions: dict[str, float], base: dict | None = None) -> dict[str, dict]:
+    """The baselines' figures on the tank with ``dimensions``, at ``maptidal compare``'s own settings
+    (Lloyd on 2 cm samples; a fit uses coarser ones): what a fitted tank is reported with."""
+    tank = TankModel(tank_config_from_dict(tank_document(dimensions, base)))
+    return baseline_figures(tank, CalibrationParams(voronoi=VoronoiParams()))
 
 
 def _figures_or_none(job: tuple[dict[str, float], dict, CalibrationParams]) -> dict | None:
@@ -273,12 +278,12 @@ class Calibration:
         for index, figures in run_jobs(_figures_or_none, work, jobs=jobs):
             scored.append((self._record(candidates[index], figures), vectors[index]))
             if progress is not None:
-                progress(len(self.evaluations), min(s for s, _ in scored))
+                progress(len(self.evaluations), min(value for value, _ in scored))
         scored.sort(key=lambda item: (item[0], item[1]))  # ties by position: whatever order runs finish in
         best_value, best = scored[0][0], np.array(scored[0][1], float)
         spans = np.array([DIMENSIONS[n][1][1] - DIMENSIONS[n][1][0] for n in self.names])
-        for _, start in scored[: p.polish_starts]:
-            if not math.isfinite(_):
+        for value, start in scored[: p.polish_starts]:
+            if not math.isfinite(value):
                 continue
             simplex = [np.array(start, float)] + [
                 np.array(start, float) + np.eye(len(start))[k] * spans[k] / max(p.grid_points, 2) / 2
@@ -307,6 +312,11 @@ class Calibration:
             self._determined(best, best_value),
             self.evaluations,
         )
+
+    @property
+    def grid_size(self) -> int:
+        """How many tanks the grid evaluates."""
+        return math.prod(self.params.grid_points for n in self.names if n in self.params.grid)
 
     def base_value(self, name: str) -> float:
         """The base tank's value of dimension ``name``, clipped into its search bounds."""

@@ -4,8 +4,9 @@
 finishes, whatever the executor. A run is a pure function of its item (missions and sweep cells seed
 everything they draw from the item), so the same items give the same results locally and on Ray.
 
-- ``local`` with one job runs in this process; with more, in a pool of fresh (spawned) processes, so no
-  GL context or thread is inherited from the parent.
+- ``local`` with one job runs in this process; with more, in a pool of fresh (spawned) processes (at
+  most one per run and per CPU: :func:`usable_jobs`), so no GL context or thread is inherited from the
+  parent.
 - ``ray`` sends the runs to a Ray cluster: ``ray.init(address=...)`` with ``ray_address``, or a local
   Ray instance with ``jobs`` CPUs when no address is given. Every node must have maptidal installed (the
   functions travel by reference, as importable names). Ray is an optional extra (``pip install -e .[ray]``).
@@ -29,6 +30,11 @@ EXECUTORS = ("local", "ray")
 WORKER_ENVIRONMENT = ("MUJOCO_GL", "PYOPENGL_PLATFORM")
 
 _initialised: set[str] = set()  # the initializer tokens already run in this (worker) process
+
+
+def usable_jobs(jobs: int, runs: int) -> int:
+    """Local processes worth starting for ``runs`` runs: at most one per run and one per CPU."""
+    return max(1, min(jobs, runs, os.cpu_count() or 1))
 
 
 def _local_worker_setup(initializer: Callable | None, initargs: tuple) -> None:
@@ -66,7 +72,9 @@ def run_jobs(
     items = list(items)
     if executor == "ray":
         yield from _run_on_ray(function, items, jobs, ray_address, initializer, initargs)
-    elif jobs == 1 or len(items) <= 1:
+        return
+    jobs = usable_jobs(jobs, len(items))
+    if jobs == 1:
         if initializer is not None:
             initializer(*initargs)
         for index, item in enumerate(items):
@@ -77,7 +85,7 @@ def run_jobs(
 
 def _run_in_processes(function, items, jobs, initializer, initargs) -> Iterator[tuple[int, Any]]:
     pool = ProcessPoolExecutor(
-        max_workers=min(jobs, len(items)),
+        max_workers=jobs,
         mp_context=multiprocessing.get_context("spawn"),
         initializer=_local_worker_setup,
         initargs=(initializer, initargs),

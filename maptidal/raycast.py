@@ -192,13 +192,13 @@ def visible_from(
     at about their own distance.
     """
     points = np.asarray(points, float).reshape(-1, 3)
+    if len(points) == 0:
+        return np.zeros(0, bool)
     origin = np.asarray(viewpoint, float)[:3]
     offsets = points - origin
     distances = np.linalg.norm(offsets, axis=1)
     safe = np.where(distances > 0.0, distances, 1.0)
     occluders = triangles if isinstance(triangles, Occluders) else Occluders.of(triangles)
-    if len(points) == 0:
-        return np.zeros(0, bool)
     # only what lies between the origin and the points can block: the box around them holds every segment
     box = (np.minimum(points.min(0), origin), np.maximum(points.max(0), origin))
     hits = occluders.first_hits_from(origin, offsets / safe[:, None], within=box)

@@ -245,6 +245,21 @@ def check_executor_args(args: argparse.Namespace) -> None:
         raise ValueError("--ray-address needs --executor ray")
 
 
+def jobs_for(args: argparse.Namespace, runs: int, command: str) -> int:
+    """``--jobs`` as it will run: on Ray as given; locally at most one process per run and per CPU
+    (:func:`maptidal.executors.usable_jobs`), saying so on stderr when that is fewer than asked."""
+    import sys
+
+    from maptidal.executors import usable_jobs
+
+    if getattr(args, "executor", "local") == "ray":
+        return args.jobs
+    jobs = usable_jobs(args.jobs, runs)
+    if jobs < args.jobs:
+        print(f"maptidal {command}: using {jobs} processes (the runs and the CPU count)", file=sys.stderr)
+    return jobs
+
+
 def add_capture_args(parser: argparse.ArgumentParser, refinement: bool = True) -> None:
     """``--capture paper|sweep`` (the synthetic keyframes' path) and, with ``refinement``,
     ``--no-refinement`` (one triangulation per keyframe instead of Kimera-like landmark fusion)."""

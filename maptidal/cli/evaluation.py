@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import sys
 from pathlib import Path
 
 from maptidal.cli.common import (
@@ -18,6 +16,7 @@ from maptidal.cli.common import (
     check_executor_args,
     coverage_params_from,
     discovery_params_from,
+    jobs_for,
     output_dir,
     positive_int,
 )
@@ -300,11 +299,7 @@ def run_sweep(args: argparse.Namespace) -> int:
         raise ValueError("--paper-grid is the paper's grid: give it or --grid, not both")
     check_executor_args(args)
     grid = dict(PAPER_GRID) if args.paper_grid else parse_grid(args.grid or [])
-    jobs = args.jobs
-    if args.executor == "local":
-        jobs = min(args.jobs, grid_size(grid), os.cpu_count() or 1)
-        if jobs < args.jobs:
-            print(f"maptidal sweep: using {jobs} processes (grid size and CPU count)", file=sys.stderr)
+    jobs = jobs_for(args, grid_size(grid), "sweep")
     plots = not args.no_plots
     rows = run_sweep(
         args.out,
@@ -344,20 +339,19 @@ def run_sweep(args: argparse.Namespace) -> int:
 
 def run_calibrate_tank(args: argparse.Namespace) -> int:
     """Handler of ``maptidal calibrate-tank``."""
-    from maptidal.baselines import VoronoiParams
     from maptidal.calibration import (
         DIMENSIONS,
         Calibration,
         CalibrationParams,
-        baseline_figures,
         calibration_markdown,
+        compare_figures,
         plot_calibration,
         residuals,
         tank_document,
     )
     from maptidal.files import atomic_write_json, atomic_write_text
     from maptidal.progress import ProgressBar
-    from maptidal.tank import TankModel, tank_config_from_dict, tank_toml
+    from maptidal.tank import tank_toml
 
     fit = tuple(DIMENSIONS) if args.fit is None else tuple(n.strip() for n in args.fit.split(","))
     grid = tuple(n for n in CalibrationParams().grid if n in fit)
@@ -365,10 +359,7 @@ def run_calibrate_tank(args: argparse.Namespace) -> int:
         grid_points=args.grid_points, polish_evaluations=args.polish_evaluations, fit=fit, grid=grid
     )
     calibration = Calibration(params=params)
-    grid_size = 1
-    for _ in grid:
-        grid_size *= args.grid_points
-    total = grid_size + 3 * args.polish_evaluations
+    total = calibration.grid_size + params.polish_starts * params.polish_evaluations
     bar = ProgressBar(total, "calibrate", enabled=not args.json)
     state = {"shown": 0}
 
@@ -378,15 +369,13 @@ def run_calibrate_tank(args: argparse.Namespace) -> int:
             bar.advance(step, f"best objective {best:.2f}")
             state["shown"] += step
 
-    result = calibration.run(progress, jobs=min(args.jobs, os.cpu_count() or 1))
-    # the best fit's figures at compare's own settings (the fit's Lloyd samples are coarser)
-    document = tank_document(result.dimensions, calibration.base)
-    final = CalibrationParams(voronoi=VoronoiParams())  # Lloyd on compare's 2 cm samples
-    result.figures = baseline_figures(TankModel(tank_config_from_dict(document)), final)
+    result = calibration.run(progress, jobs=jobs_for(args, calibration.grid_size, "calibrate-tank"))
+    # reported at compare's own settings (the fit's Lloyd samples are coarser)
+    result.figures = compare_figures(result.dimensions, calibration.base)
     result.residuals = residuals(result.figures)
     out = Path(args.out)
     base = {name: calibration.base_value(name) for name in DIMENSIONS}
-    document["name"] = "osb_tank_calibrated"
+    document = {**tank_document(result.dimensions, calibration.base), "name": "osb_tank_calibrated"}
     header = (
         "The OSB tank with the dimensions the paper leaves open fitted to its baselines' figures\n"
         "(maptidal calibrate-tank; the fit, its residuals and ranges: calibration.md beside this file)."

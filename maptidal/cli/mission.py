@@ -11,6 +11,7 @@ from maptidal.cli.common import (
     add_executor_args,
     add_output_folder,
     check_executor_args,
+    jobs_for,
     positive_float,
     positive_int,
 )
@@ -134,17 +135,11 @@ def run_report(args: argparse.Namespace) -> int:
 
 def run_batch_command(args: argparse.Namespace) -> int:
     """Handler of ``maptidal batch``."""
-    import os
-    import sys
-
     from maptidal.mission.batch import batch_markdown, parse_seeds, run_batch
 
     check_executor_args(args)
     seeds = parse_seeds(args.seeds)
-    jobs = args.jobs
-    if args.executor == "local" and jobs > (os.cpu_count() or 1):
-        jobs = os.cpu_count() or 1
-        print(f"maptidal batch: using {jobs} processes (the CPU count)", file=sys.stderr)
+    jobs = jobs_for(args, len(seeds), "batch")
     rows, summary = run_batch(
         args.scenario,
         seeds,

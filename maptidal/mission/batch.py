@@ -27,6 +27,7 @@ import numpy as np
 
 from maptidal.executors import run_jobs
 from maptidal.files import atomic_write_json, atomic_write_text
+from maptidal.mission.outputs import mission_metrics
 from maptidal.progress import ProgressBar
 
 # the per-mission metrics, in table order, with their units (``batch.md``, ``batch.png``)
@@ -69,27 +70,6 @@ def parse_seeds(text: str) -> list[int]:
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"seeds {text!r} repeat a seed")
     return seeds
-
-
-def mission_metrics(document: dict) -> dict:
-    """A mission document's metrics (:data:`METRICS`, plus ``finished`` and the wall-clock figures)."""
-    tasks = document.get("tasks", [])
-    coverage = document.get("coverage", {}).get("occluded", {})
-    comms = document.get("comms", {})
-    return {
-        "finished": bool(document.get("finished")),
-        "tasks_found": len(tasks),
-        "tasks_done": sum(1 for t in tasks if t.get("completed")),
-        "pct_uninspected": float(coverage.get("pct_uninspected", 100.0)),
-        "mean_views": float(coverage.get("mean_views", 0.0)),
-        "mad": coverage.get("mad"),  # None without captured views
-        "completion_time_s": float(document.get("sim_time_s", 0.0)),
-        "messages": int(comms.get("messages", 0)),
-        "bytes": int(comms.get("bytes", 0)),
-        "lost": int(comms.get("lost", 0)),
-        "realtime_factor": document.get("realtime_factor"),
-        "wall_time_s": document.get("wall_time_s"),
-    }
 
 
 def run_one(run: BatchRun) -> dict:

@@ -204,20 +204,40 @@ def _trajectory_rows(root: Path) -> np.ndarray:
     return np.array(rows).reshape(-1, 9)
 
 
-def report_markdown(document: dict) -> str:
-    """``report.md``: the summary table and the plots."""
+def mission_metrics(document: dict) -> dict:
+    """A mission document's figures: whether it finished, tasks found and done, the coverage of the captured
+    views (occlusion on), the completion time, the comms counters and the wall-clock figures (what
+    ``maptidal batch`` aggregates, and the summary table shows)."""
     tasks = document.get("tasks", [])
-    done = sum(1 for t in tasks if t.get("completed"))
     coverage = document.get("coverage", {}).get("occluded", {})
     comms = document.get("comms", {})
+    return {
+        "finished": bool(document.get("finished")),
+        "tasks_found": len(tasks),
+        "tasks_done": sum(1 for t in tasks if t.get("completed")),
+        "pct_uninspected": float(coverage.get("pct_uninspected", 100.0)),
+        "mean_views": float(coverage.get("mean_views", 0.0)),
+        "mad": coverage.get("mad"),  # None without captured views
+        "completion_time_s": float(document.get("sim_time_s", 0.0)),
+        "messages": int(comms.get("messages", 0)),
+        "bytes": int(comms.get("bytes", 0)),
+        "lost": int(comms.get("lost", 0)),
+        "realtime_factor": document.get("realtime_factor"),
+        "wall_time_s": document.get("wall_time_s"),
+    }
+
+
+def report_markdown(document: dict) -> str:
+    """``report.md``: the summary table and the plots."""
+    m = mission_metrics(document)
     lines = [
         "# Map-TIDAL mission",
         "",
         summary_table(document),
         "",
-        f"Tasks: {len(tasks)} found, {done} done. Coverage of the captured views (occlusion on): "
-        f"{coverage.get('pct_uninspected', float('nan')):.1f} % of the walls uninspected. Comms: "
-        f"{comms.get('messages', 0)} messages, {comms.get('bytes', 0)} bytes, {comms.get('lost', 0)} lost.",
+        f"Tasks: {m['tasks_found']} found, {m['tasks_done']} done. Coverage of the captured views (occlusion "
+        f"on): {m['pct_uninspected']:.1f} % of the walls uninspected. Comms: {m['messages']} messages, "
+        f"{m['bytes']} bytes, {m['lost']} lost.",
         "",
         "![top view](top_view.png)",
         "",
@@ -233,21 +253,16 @@ def report_markdown(document: dict) -> str:
 
 def summary_table(document: dict) -> str:
     """The one-table summary printed at the end of a mission."""
-    tasks = document.get("tasks", [])
-    coverage = document.get("coverage", {}).get("occluded", {})
-    comms = document.get("comms", {})
-    rtf = document.get("realtime_factor")
+    m = mission_metrics(document)
+    rtf = m["realtime_factor"]
     rows = [
-        ("simulated time", f"{document.get('sim_time_s', 0):.1f} s"),
+        ("simulated time", f"{m['completion_time_s']:.1f} s"),
         ("real-time factor", f"{rtf:.1f}x" if rtf else "n/a"),
-        ("finished", str(document.get("finished"))),
-        ("tasks found / done", f"{len(tasks)} / {sum(1 for t in tasks if t.get('completed'))}"),
+        ("finished", str(m["finished"])),
+        ("tasks found / done", f"{m['tasks_found']} / {m['tasks_done']}"),
         ("allocation conflicts", str(document.get("allocation_conflicts", "n/a"))),
-        ("walls uninspected (occluded)", f"{coverage.get('pct_uninspected', float('nan')):.1f} %"),
-        (
-            "messages / bytes / lost",
-            f"{comms.get('messages', 0)} / {comms.get('bytes', 0)} / {comms.get('lost', 0)}",
-        ),
+        ("walls uninspected (occluded)", f"{m['pct_uninspected']:.1f} %"),
+        ("messages / bytes / lost", f"{m['messages']} / {m['bytes']} / {m['lost']}"),
     ]
     return "\n".join(["| figure | value |", "|---|---|", *(f"| {a} | {b} |" for a, b in rows)])
 

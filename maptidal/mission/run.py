@@ -37,7 +37,6 @@ from controllers.pose import PoseController
 from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, Route
 from envs.scenario import Scenario, inside_tank, load_scenario
 from envs.simulation import Simulation
-from envs.views import overview_camera, third_person_frame
 from envs.world import camera_offsets
 from maptidal.allocation.agent import AgentParams
 from maptidal.allocation.auction import AuctionEvent, AuctionSimulation
@@ -50,6 +49,7 @@ from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
 from maptidal.free_space import free_space_mask
 from maptidal.mission.capture import camera_pose_from_body
 from maptidal.mission.outputs import MissionWriter
+from maptidal.mission.video import MissionVideo
 from maptidal.perception.frontend import POSE_SOURCES, FrontEnd, FrontEndParams
 from maptidal.perception.keyframing import KeyframeParams
 from maptidal.perception.odometry import OdometryParams
@@ -610,58 +610,3 @@ class Mission:
             "tasks": sorted(self.tasks.values(), key=lambda t: t["id"]),
             "timing": dict(self.timing),
         }
-
-
-class MissionVideo:
-    """``mission.mp4``: a camera behind the team (looking at the live robots' centroid) with each robot's
-    latest left image inset and the time and task counts written on; written to ``mission.part.mp4``
-    and renamed when the mission ends, so a killed mission leaves no file that looks whole."""
-
-    def __init__(self, mission: Mission, params: MissionParams) -> None:
-        import cv2
-        import mujoco
-
-        self.mission = mission
-        self.every_s = 1.0 / params.video_frames_per_sim_s
-        self.next_s = 0.0
-        width, height = params.video_size
-        self.renderer = mujoco.Renderer(mission.sim.model, height, width)
-        self.path = mission.writer.root / "mission.mp4"
-        self.partial = self.path.with_name("mission.part.mp4")  # OpenCV picks the container by extension
-        self.writer = cv2.VideoWriter(
-            str(self.partial), cv2.VideoWriter_fourcc(*"mp4v"), params.video_playback_fps, (width, height)
-        )
-        if not self.writer.isOpened():
-            self.renderer.close()
-            raise RuntimeError("this OpenCV build cannot write MP4 (mp4v) video")
-        self.frames = 0
-
-    def frame_due(self, now: float) -> None:
-        """Write a frame if one is due at ``now``."""
-        if now < self.next_s - 1e-9:
-            return
-        import cv2
-
-        self.next_s += self.every_s
-        mission = self.mission
-        names = list(mission.robots)
-        live = [r.name for r in mission.robots.values() if r.active] or names
-        centre = np.mean([mission.sim.ground_truth(name)["position"] for name in live], axis=0)
-        blank = np.zeros((mission.intrinsics.height, mission.intrinsics.width, 3), np.uint8)
-        insets = {r.name: r.last_left if r.last_left is not None else blank for r in mission.robots.values()}
-        frame = third_person_frame(
-            mission.sim, self.renderer, names, overview_camera(centre), insets, labels=True
-        )
-        done = sum(1 for t in mission.tasks.values() if t["completed"])
-        inspected = mission.inspected_pct()
-        text = f"t = {now:5.1f} s   tasks {done}/{len(mission.tasks)} done   {inspected:.0f} % inspected"
-        bgr = cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)
-        cv2.putText(bgr, text, (8, bgr.shape[0] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1)
-        self.writer.write(bgr)
-        self.frames += 1
-
-    def close(self) -> None:
-        """Finish the file and give it its name."""
-        self.writer.release()
-        self.renderer.close()
-        self.partial.replace(self.path)
