@@ -40,9 +40,9 @@ def pilot_command(values: Sequence[float] | Mapping[str, float] | np.ndarray | N
     command = np.asarray(values, dtype=float)
     if command.shape != (6,):
         raise CommandError(f"a pilot command has 6 values ({', '.join(AXES)}), got shape {command.shape}")
-    if not np.all(np.isfinite(command)):
+    if not np.isfinite(command).all():
         raise CommandError(f"a pilot command must be finite, got {command.tolist()}")
-    return np.clip(command, -1.0, 1.0)
+    return command.clip(-1.0, 1.0)
 
 
 def parse_command(text: str) -> np.ndarray:

@@ -8,7 +8,13 @@ west (left), z up; body x forward, y left, z up. The input is a plain dict of re
     {"imu": {"accel": [ax, ay, az], "gyro": [p, q, r]},       # m/s^2 specific force, rad/s, body
      "depth": {"depth_m": d},                                   # m below the surface
      "dvl": {"velocity_body": [u, v, w] or None, "valid": bool},# m/s over ground, body
-     "compass": {"heading_deg": h}}                             # deg clockwise from north
+     "compass": {"heading_deg": h},                             # deg clockwise from north
+     "thrust": {"force_body": [X, Y, Z]}}                       # N, body: the thrusters' commanded force
+
+The last is no sensor: it is the force the vehicle's own thruster commands ask for (the simulator's
+mixer output, or a real vehicle's SERVO_OUTPUT_RAW through its thrust curve). Without a DVL, or while the
+DVL has no bottom lock, the estimator integrates it through the vehicle's motion model
+(:class:`MotionModel`) for the velocity, so x and y still move and the controllers still damp.
 """
 
 from __future__ import annotations
@@ -75,25 +81,58 @@ def wrap_angle(angle: float) -> float:
 @dataclass(frozen=True)
 class EstimatorParams:
     """Where the water surface is (world z, m), where the pressure sensor and the DVL sit on the body (m
-    from the CG), and how fast the accelerometer corrects the gyro's tilt."""
+    from the CG), how fast the accelerometer corrects the gyro's tilt, and the vehicle's motion model for
+    dead reckoning without a DVL."""
 
     surface_z_m: float
     depth_sensor_position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     dvl_position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     tilt_correction_rad_s: float = 0.2  # complementary filter crossover: gyro above, gravity below
+    # the velocity without a DVL (None: x and y stand still while there is no DVL velocity)
+    motion_model: MotionModel | None = None
+
+
+@dataclass(frozen=True)
+class MotionModel:
+    """The vehicle's translational dynamics for dead reckoning without a DVL (model-aided navigation):
+    per body axis k (surge, sway, heave), Fossen's decoupled
+
+        (m + m_A)_k dv_k/dt = tau_k - (d_lin,k + d_quad,k |v_k|) v_k
+
+    with tau the thrusters' commanded force plus the net buoyancy (world up, N) in body axes. The
+    Coriolis and centripetal terms are left out (the vehicle is slow), and so is the thrusters' lag. The
+    velocity is through the water: a current drifts the estimate by its own speed."""
+
+    inertia: tuple[float, float, float]  # kg, M_RB + M_A along each body axis
+    linear_damping: tuple[float, float, float]  # N s / m
+    quadratic_damping: tuple[float, float, float]  # N s^2 / m^2
+    net_buoyancy_n: float = 0.0  # buoyancy minus weight
+
+    def step(self, velocity_body: np.ndarray, force_body, up_body: np.ndarray, dt: float) -> np.ndarray:
+        """The body velocity ``dt`` seconds on, under ``force_body`` (N; thrust, without buoyancy), with
+        ``up_body`` the world vertical in body axes. Semi-implicit Euler: the damping is taken at the new
+        velocity, so the step is stable at any ``dt``."""
+        v = np.asarray(velocity_body, float)
+        force = np.asarray(force_body, float) + self.net_buoyancy_n * np.asarray(up_body, float)
+        mass = np.asarray(self.inertia, float)
+        damping = np.asarray(self.linear_damping, float)
+        damping = damping + np.asarray(self.quadratic_damping, float) * np.abs(v)
+        return (mass * v + dt * force) / (mass + dt * damping)
 
 
 class DeadReckoning:
     """Attitude from gyro and gravity (a complementary filter; the body's own acceleration, from the
-    DVL, taken out of the accelerometer) with the compass for yaw; z from the
-    depth sensor; x and y by integrating the DVL's velocity rotated into the world frame (held at its
-    last value while the DVL has no bottom lock). Starts from a known pose."""
+    DVL, taken out of the accelerometer) with the compass for yaw; z from the depth sensor; x and y by
+    integrating the body velocity rotated into the world frame. The velocity is the DVL's; without a
+    valid DVL reading it comes from ``params.motion_model`` and the ``thrust`` reading where both are
+    there, and is otherwise held at its last value. Starts from a known pose."""
 
     def __init__(self, params: EstimatorParams, start_position, start_yaw: float = 0.0) -> None:
         self.params = params
         self.state = StateEstimate(position=np.asarray(start_position, float).copy())
         self.state.rpy[2] = start_yaw
         self._velocity_world = np.zeros(3)
+        self._depth_sensor_position = np.asarray(params.depth_sensor_position, float)
 
     def update(self, readings: dict, dt: float) -> StateEstimate:
         """Fold in one step's readings (``dt`` seconds since the last) and return the estimate."""
@@ -102,9 +141,17 @@ class DeadReckoning:
         gyro = np.asarray(imu["gyro"], float) if imu is not None else s.angular_velocity_body
         dvl = readings.get("dvl")
         previous_velocity = s.velocity_body.copy()
-        if dvl is not None and dvl.get("valid") and dvl.get("velocity_body") is not None:
+        dvl_valid = dvl is not None and dvl.get("valid") and dvl.get("velocity_body") is not None
+        thrust = readings.get("thrust")
+        modelled = not dvl_valid and self.params.motion_model is not None and thrust is not None
+        if dvl_valid:
             # the DVL measures its own velocity: take out the lever arm w x r_dvl of a turning vehicle
             s.velocity_body = np.asarray(dvl["velocity_body"], float) - cross3(gyro, self.params.dvl_position)
+        elif modelled:
+            up_body = rotation_from_rpy(*s.rpy)[2]  # the world vertical in body axes: R's last row
+            s.velocity_body = self.params.motion_model.step(
+                s.velocity_body, thrust["force_body"], up_body, dt
+            )
         if imu is not None:
             s.angular_velocity_body = gyro
             roll, pitch = s.rpy[0] + gyro[0] * dt, s.rpy[1] + gyro[1] * dt
@@ -120,15 +167,16 @@ class DeadReckoning:
         compass = readings.get("compass")
         if compass is not None:
             s.rpy[2] = wrap_angle(-math.radians(compass["heading_deg"]))
+        rotation = rotation_from_rpy(*s.rpy)  # the attitude is final from here on
         if imu is not None:
-            specific_force = rotation_from_rpy(*s.rpy) @ np.asarray(imu["accel"], float)
+            specific_force = rotation @ np.asarray(imu["accel"], float)
             s.acceleration_world = specific_force - np.array([0.0, 0.0, STANDARD_GRAVITY])
         depth = readings.get("depth")
         if depth is not None:
-            sensor_height = (rotation_from_rpy(*s.rpy) @ np.asarray(self.params.depth_sensor_position))[2]
+            sensor_height = float(rotation[2] @ self._depth_sensor_position)
             s.position[2] = self.params.surface_z_m - float(depth["depth_m"]) - sensor_height
-        if dvl is not None and dvl.get("valid") and dvl.get("velocity_body") is not None:
-            self._velocity_world = rotation_from_rpy(*s.rpy) @ s.velocity_body
+        if dvl_valid or modelled:
+            self._velocity_world = rotation @ s.velocity_body
         s.position[:2] += self._velocity_world[:2] * dt
         s.time_s += dt
         return s

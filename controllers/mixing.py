@@ -69,9 +69,14 @@ class MixerParams:
             raise ValueError(f"unknown ArduSub frame {self.frame!r}; choose one of {sorted(FRAMES)}")
 
 
-def _axis_inputs(command: np.ndarray) -> tuple[float, float, float, float, float, float]:
-    surge, sway, heave, roll, pitch, yaw = (float(v) for v in command)
-    return roll, pitch, yaw, heave, surge, sway
+# the factors' columns (roll, pitch, yaw, throttle, forward, lateral) taken in pilot-command order (surge,
+# sway, heave, roll, pitch, yaw), so that a motor's mix is one dot product with the command
+_FACTOR_COLUMN_OF_PILOT_AXIS = [4, 5, 3, 0, 1, 2]
+_PILOT_FACTORS = {name: factors[:, _FACTOR_COLUMN_OF_PILOT_AXIS] for name, factors in FRAMES.items()}
+# vectored_6dof mixes two groups apart: roll, pitch and throttle (pilot axes 3, 4, 2); yaw, forward and
+# lateral (5, 0, 1)
+_ROLL_PITCH_THROTTLE = _PILOT_FACTORS["vectored_6dof"] * np.array([0, 0, 1, 1, 1, 0], float)
+_YAW_FORWARD_LATERAL = _PILOT_FACTORS["vectored_6dof"] * np.array([1, 1, 0, 0, 0, 1], float)
 
 
 def mix(command, params: MixerParams | None = None) -> np.ndarray:
@@ -81,18 +86,18 @@ def mix(command, params: MixerParams | None = None) -> np.ndarray:
     Returns one value per motor, M1 first.
     """
     params = params or MixerParams()
-    roll, pitch, yaw, throttle, forward, lateral = _axis_inputs(pilot_command(command))
-    factors = FRAMES[params.frame]
-    r, p, y, t, f, lat = factors.T
+    pilot = pilot_command(command)
     if params.frame == "vectored_6dof":
-        rpt = roll * r + pitch * p + throttle * t
-        yfl = yaw * y + forward * f + lateral * lat
-        rpt_max = max(1.0, float(np.max(np.abs(rpt))))
-        yfl_max = max(1.0, float(np.max(np.abs(yfl))))
-        return np.clip(rpt / rpt_max + yfl / yfl_max, -1.0, 1.0)
+        rpt = _ROLL_PITCH_THROTTLE @ pilot
+        yfl = _YAW_FORWARD_LATERAL @ pilot
+        rpt_max = max(1.0, float(np.abs(rpt).max()))
+        yfl_max = max(1.0, float(np.abs(yfl).max()))
+        return (rpt / rpt_max + yfl / yfl_max).clip(-1.0, 1.0)
+    forward, lateral, throttle, roll, pitch, yaw = (float(v) for v in pilot)
+    r, p, y, t, f, lat = FRAMES[params.frame].T
     rpy = roll * r + pitch * p + yaw * y
     limit = max(0.0, 1.0 - params.forward_vertical_coupling * abs(throttle))
-    forward_per_motor = np.full(len(factors), forward)
+    forward_per_motor = np.full(len(r), forward)
     if forward != 0.0:
         rear = ((forward < 0) == (_FORWARD_COUPLING_DIRECTION < 0)) & (_FORWARD_COUPLING_DIRECTION != 0)
         forward_per_motor[rear] = np.clip(forward, -limit, limit)

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controllers.estimation import StateEstimate, rotation_from_rpy, wrap_angle
+from controllers.estimation import MotionModel, StateEstimate, rotation_from_rpy, wrap_angle
 from controllers.mixing import MixerParams, allocation_matrix, mix
 from controllers.pid import PID, PIDGains
 from controllers.thrusters import PwmRange, ThrustCurve
@@ -71,6 +71,20 @@ class VehicleModel:
             return np.where(c >= 0, c * self.max_forward_n, c * self.max_reverse_n)
         return self.thrust_curve.thrust_from_command(c, self.pwm_range)
 
+    def body_force(self, commands) -> np.ndarray:
+        """The body-frame force (N, x y z) that mixed thruster commands in [-1, 1] (M1 first) give."""
+        return _force_matrix(self) @ self.thruster_forces(commands)
+
+    def motion_model(self) -> MotionModel:
+        """The translational part of this model, for dead reckoning without a DVL
+        (:class:`controllers.estimation.MotionModel`)."""
+        return MotionModel(
+            inertia=tuple(self.inertia[:3]),
+            linear_damping=tuple(self.linear_damping[:3]),
+            quadratic_damping=tuple(self.quadratic_damping[:3]),
+            net_buoyancy_n=self.net_buoyancy_n,
+        )
+
     @property
     def authority_table(self) -> np.ndarray:
         """``(2, 6, 101)``: the body force or torque magnitude that a pure pilot command of 0, 0.01 .. 1
@@ -100,6 +114,14 @@ class VehicleModel:
             level = float(np.interp(min(abs(pilot[axis]), forces[-1]), forces, levels))
             out[axis] = np.copysign(level, pilot[axis])
         return np.clip(out, -1.0, 1.0)
+
+
+@functools.lru_cache(maxsize=64)
+def _force_matrix(model: VehicleModel) -> np.ndarray:
+    # thruster forces (N) to body force: the first three rows of the allocation matrix
+    matrix = allocation_matrix(model.thruster_positions, model.thruster_directions)[:3].copy()
+    matrix.setflags(write=False)
+    return matrix
 
 
 @functools.lru_cache(maxsize=64)
@@ -182,6 +204,12 @@ class PoseController:
     def reset(self) -> None:
         """Forget every integral."""
         for pid in (*self.axes, *self.attitude):
+            pid.reset()
+
+    def reset_horizontal(self) -> None:
+        """Forget the x and y integrals: for a hold without horizontal position feedback, where what they
+        had built up would push on with nothing to stop it."""
+        for pid in self.axes[:2]:
             pid.reset()
 
     def update(self, estimate: StateEstimate, reference: PoseReference, dt: float) -> np.ndarray:

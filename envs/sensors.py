@@ -19,7 +19,6 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from controllers.estimation import cross3
 from envs.world import ROBOT_SENSORS
 
 WATER_DENSITY = 1000.0  # kg/m^3, fresh water tank
@@ -126,10 +125,15 @@ def heading_from_field(field_body: np.ndarray, up_body: np.ndarray) -> float:
     ``up_body`` is the world vertical in body axes (any length); the field's
     horizontal part gives north.
     """
-    up = up_body / np.linalg.norm(up_body)
-    horizontal = field_body - np.dot(field_body, up) * up
-    forward = np.array([1.0, 0.0, 0.0]) - up[0] * up
-    left = cross3(up, forward)
+    # plain floats: numpy costs more than the arithmetic on 3-vectors, and this runs every control period
+    ux, uy, uz = np.asarray(up_body, float).tolist()
+    norm = math.sqrt(ux * ux + uy * uy + uz * uz)
+    ux, uy, uz = ux / norm, uy / norm, uz / norm
+    fx, fy, fz = np.asarray(field_body, float).tolist()
+    along = fx * ux + fy * uy + fz * uz
+    hx, hy, hz = fx - along * ux, fy - along * uy, fz - along * uz  # the field's horizontal part
+    ax, ay, az = 1.0 - ux * ux, -ux * uy, -ux * uz  # body forward, made horizontal
+    lx, ly, lz = uy * az - uz * ay, uz * ax - ux * az, ux * ay - uy * ax  # up x forward: left
     # angle from north to forward, clockwise seen from above
-    angle = math.atan2(np.dot(horizontal, left), np.dot(horizontal, forward))
+    angle = math.atan2(hx * lx + hy * ly + hz * lz, hx * ax + hy * ay + hz * az)
     return math.degrees(angle) % 360.0

@@ -39,6 +39,7 @@ from controllers.convention import pilot_command
 from controllers.estimation import DeadReckoning, EstimatorParams, StateEstimate
 from controllers.flight_modes import FLIGHT_MODES, FlightController, ModeParams
 from controllers.mixing import MixerParams, mix
+from controllers.pose import VehicleModel
 from controllers.thrusters import linearise_thrusters
 from envs import hydrodynamics
 from envs.gl_water import CameraGeometry
@@ -57,6 +58,14 @@ from envs.world import DEPTH_SENSOR_POSITION, RobotPlacement, camera_offsets, co
 from maptidal.camera import StereoCameraParams
 
 WATER_BACKENDS = ("auto", "gl", "cpu")
+
+
+# the warnings MuJoCo counts when it resets a bad state itself
+_BAD_STATE_WARNINGS = [
+    int(mujoco.mjtWarning.mjWARN_BADQPOS),
+    int(mujoco.mjtWarning.mjWARN_BADQVEL),
+    int(mujoco.mjtWarning.mjWARN_BADQACC),
+]
 
 
 class SimulationError(RuntimeError):
@@ -101,6 +110,7 @@ class Simulation:
         self._slots: dict[str, hydrodynamics.RobotSlot] = {}
         self._sensors: dict[str, RobotSensors] = {}
         self._mixers: dict[str, MixerParams] = {}
+        self._vehicle_models: dict[str, VehicleModel] = {}  # what the robots know of themselves
         self._ctrl_adr: dict[str, int] = {}
         for robot in self.scenario.robots:
             body = self.model.body(f"{robot.name}/base")
@@ -120,6 +130,7 @@ class Simulation:
                 self.scenario.tank.height,
             )
             self._mixers[robot.name] = MixerParams(frame=robot.vehicle.ardusub_frame)
+            self._vehicle_models[robot.name] = robot.vehicle.controller_model()
         if water_backend not in WATER_BACKENDS:
             raise ValueError(f"water_backend must be one of {WATER_BACKENDS}, got {water_backend!r}")
         self.water = WaterModel(self.scenario.water)
@@ -255,15 +266,26 @@ class Simulation:
         spec = self._specs[robot]
         truth = self.ground_truth(robot)
         params = EstimatorParams(
-            self.scenario.tank.height, DEPTH_SENSOR_POSITION, spec.vehicle.sensors.dvl_position
+            self.scenario.tank.height,
+            DEPTH_SENSOR_POSITION,
+            spec.vehicle.sensors.dvl_position,
+            motion_model=self._vehicle_models[robot].motion_model(),
         )
         self._estimators[robot] = DeadReckoning(params, truth["position"], truth["rpy"][2])
         self._update_estimate(robot)
 
     def _update_estimate(self, robot: str) -> None:
-        self._readings[robot] = self.sensors(robot)
+        readings = self.sensors(robot)
+        dvl = readings.get("dvl")
+        if dvl is None or not dvl["valid"]:
+            # no DVL velocity: the estimator falls back on the force the robot's own thruster commands ask
+            # for (what a real vehicle knows of its outputs), through its motion model
+            outputs = self._thruster_outputs.get(robot)
+            force = np.zeros(3) if outputs is None else self._vehicle_models[robot].body_force(outputs)
+            readings["thrust"] = {"force_body": force.tolist()}
+        self._readings[robot] = readings
         period = self.scenario.substeps * self.scenario.timestep_s
-        self._estimators[robot].update(self._readings[robot], period)
+        self._estimators[robot].update(readings, period)
 
     def estimate(self, robot: str) -> StateEstimate:
         """``robot``'s dead-reckoned state from its own sensors, as of the end of the last control period
@@ -358,7 +380,7 @@ class Simulation:
         for sensors in self._sensors.values():
             sensors.advance(n_steps * self.scenario.timestep_s, self.rng)
         diverged = self._instability_warnings() > bad_before
-        if diverged or not (np.all(np.isfinite(self.data.qpos)) and np.all(np.isfinite(self.data.qvel))):
+        if diverged or not (np.isfinite(self.data.qpos).all() and np.isfinite(self.data.qvel).all()):
             raise SimulationError(
                 f"the physics state became NaN or diverged at t = {self.time:.3f} s; "
                 f"last thruster commands {self.data.ctrl.round(3).tolist()}. Reset the simulation."
@@ -367,12 +389,7 @@ class Simulation:
 
     def _instability_warnings(self) -> int:
         # MuJoCo resets the state itself on a bad qpos/qvel/qacc and counts a warning
-        kinds = (
-            mujoco.mjtWarning.mjWARN_BADQPOS,
-            mujoco.mjtWarning.mjWARN_BADQVEL,
-            mujoco.mjtWarning.mjWARN_BADQACC,
-        )
-        return sum(int(self.data.warning[kind].number) for kind in kinds)
+        return int(self.data.warning.number[_BAD_STATE_WARNINGS].sum())
 
     # ----- reading ----------------------------------------------------------------------
     def sensors(self, robot: str) -> dict:

@@ -236,7 +236,10 @@ def test_pnp_recovers_a_known_camera_motion():
 
 
 def test_visual_odometry_moves_by_the_visual_step_and_falls_back_on_dead_reckoning():
-    odometry = VisualOdometry(OdometryParams(visual_weight=1.0, visual_weight_depth=1.0))
+    # no gate here: this checks the fusion (tests/test_model_aided.py checks the gate)
+    odometry = VisualOdometry(
+        OdometryParams(visual_weight=1.0, visual_weight_depth=1.0, max_disagreement_m=math.inf)
+    )
     start = _pose(0.0, 30.0)
     odometry.update(start, None)
     # the camera moves 0.1 m along its own forward axis (optical z): x_cur = x_prev - (0, 0, 0.1)
@@ -249,8 +252,8 @@ def test_visual_odometry_moves_by_the_visual_step_and_falls_back_on_dead_reckoni
     assert math.isclose(odometry.visual_updates, 1)
 
 
-def test_without_a_dvl_vision_carries_the_horizontal_motion_alone():
-    params = OdometryParams(visual_weight=0.5, visual_weight_depth=0.25, has_dvl=False)
+def test_without_a_dvl_or_a_motion_model_vision_carries_the_horizontal_motion_alone():
+    params = OdometryParams(visual_weight=0.5, visual_weight_depth=0.25, has_dvl=False, model_aided=False)
     odometry = VisualOdometry(params)
     start = _pose(0.0)
     odometry.update(start, None)

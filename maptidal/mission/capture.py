@@ -162,6 +162,9 @@ def _fly(sim: Simulation, out_dir: Path, params: CaptureParams, seed: int, robot
         "surface": SURFACE_FILE,
         "robot": robot,
         "sensors": list(spec.sensors),
+        # the simulator's dead reckoning: without a DVL, its horizontal velocity comes from the thrust
+        # commands through the vehicle's motion model (controllers.estimation.MotionModel)
+        "dead_reckoning": "model-aided",
         "path": params.path,
         "seed": seed,
         "water": dataclasses.asdict(sim.scenario.water),

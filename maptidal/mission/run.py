@@ -158,6 +158,7 @@ class _Robot:
     centre: np.ndarray
     activity: str = "explore"  # explore, fly, hold, idle, failed
     route: Route | None = None
+    goal: PoseReference | None = None  # where the route to the current task ends
     route_start_s: float = 0.0
     task_key: int | None = None
     task_started_s: float = 0.0
@@ -314,6 +315,8 @@ class Mission:
         lost = now - robot.last_fix_s > self.params.lost_after_s
         if lost != robot.lost:
             robot.lost = lost
+            if lost:
+                robot.controller.reset_horizontal()
             self.writer.event(now, "position_lost" if lost else "position_regained", robot=robot.name)
         return lost
 
@@ -521,6 +524,7 @@ class Mission:
             robot.route = Route(
                 [PoseTrajectory(estimate.position.copy(), estimate.yaw, goal, yaw, self._limits())]
             )
+            robot.goal = robot.route.at(robot.route.duration)
             robot.route_start_s, robot.task_started_s, robot.task_key = now, now, key
             robot.within_since_s = None
             robot.activity = "fly"
@@ -533,7 +537,7 @@ class Mission:
                 robot.activity = "idle"  # done by another robot, or re-allocated
                 self.writer.event(now, "released", robot=robot.name, task=key)
                 return
-            goal = robot.route.at(robot.route.duration)
+            goal = robot.goal
             estimate = self._estimate(robot)
             close = np.linalg.norm(estimate.position - goal.position) <= self.params.position_tolerance_m
             aligned = abs(math.remainder(goal.yaw - estimate.yaw, 2 * math.pi)) <= math.radians(

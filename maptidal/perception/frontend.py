@@ -211,8 +211,11 @@ def run_frontend(
     params = params or FrontEndParams()
     sensors = recording.metadata.get("sensors")
     if isinstance(sensors, list) and "dvl" not in sensors and params.odometry.has_dvl:
-        # the robot had no DVL: its dead reckoning knows nothing of horizontal motion
-        params = dataclasses.replace(params, odometry=dataclasses.replace(params.odometry, has_dvl=False))
+        # the robot had no DVL: its dead reckoning's horizontal motion is model-aided where the recording
+        # says so (the simulator's, from `maptidal capture`), and otherwise taken to be nothing
+        model_aided = recording.metadata.get("dead_reckoning") == "model-aided" and wanted == "dr"
+        odometry = dataclasses.replace(params.odometry, has_dvl=False, model_aided=model_aided)
+        params = dataclasses.replace(params, odometry=odometry)
     front = FrontEnd(recording.intrinsics, pose_source, params)
     frames, keyframes = [], []
     for n, frame in enumerate(recording.frames):
