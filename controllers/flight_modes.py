@@ -121,4 +121,4 @@ class FlightController:
                 self.position_control.reset()
             else:
                 out[0], out[1] = self.position_control.update(self._hold_xy, estimate, dt)
-        return np.clip(out, -1.0, 1.0)
+        return out.clip(-1.0, 1.0)

@@ -113,7 +113,7 @@ class VehicleModel:
                 continue
             level = float(np.interp(min(abs(pilot[axis]), forces[-1]), forces, levels))
             out[axis] = np.copysign(level, pilot[axis])
-        return np.clip(out, -1.0, 1.0)
+        return out.clip(-1.0, 1.0)
 
 
 @functools.lru_cache(maxsize=64)

@@ -64,14 +64,14 @@ class PwmRange:
 
 def command_to_pwm(command, pwm: PwmRange = PwmRange()) -> np.ndarray:
     """ArduSub's ``calc_thrust_to_pwm``: thruster commands in [-1, 1] (clipped) to pulse widths (us)."""
-    c = np.clip(np.asarray(command, float), -1.0, 1.0)
+    c = np.asarray(command, float).clip(-1.0, 1.0)
     up, down = pwm.pwm_max_us - NEUTRAL_PWM_US, NEUTRAL_PWM_US - pwm.pwm_min_us
     return NEUTRAL_PWM_US + c * np.where(c > 0, up, down)
 
 
 def pwm_to_command(pulse_us, pwm: PwmRange = PwmRange()) -> np.ndarray:
     """The inverse of :func:`command_to_pwm`: pulse widths (us) to thruster commands in [-1, 1]."""
-    p = np.clip(np.asarray(pulse_us, float), pwm.pwm_min_us, pwm.pwm_max_us) - NEUTRAL_PWM_US
+    p = np.asarray(pulse_us, float).clip(pwm.pwm_min_us, pwm.pwm_max_us) - NEUTRAL_PWM_US
     up, down = pwm.pwm_max_us - NEUTRAL_PWM_US, NEUTRAL_PWM_US - pwm.pwm_min_us
     return np.where(p > 0, p / up, p / down)
 
@@ -101,9 +101,9 @@ class ThrustCurve:
 
     def thrust_n(self, pulse_us) -> np.ndarray:
         """Static thrust (N, positive forward) at each pulse width (us; clipped to 1100-1900)."""
-        p = np.clip(np.asarray(pulse_us, float), T200_PWM_MIN_US, T200_PWM_MAX_US) - NEUTRAL_PWM_US
+        p = np.asarray(pulse_us, float).clip(T200_PWM_MIN_US, T200_PWM_MAX_US) - NEUTRAL_PWM_US
         span = (NEUTRAL_PWM_US - T200_PWM_MIN_US) - self.deadband_us
-        s = np.clip((np.abs(p) - self.deadband_us) / span, 0.0, 1.0)
+        s = ((np.abs(p) - self.deadband_us) / span).clip(0.0, 1.0)
         k = np.where(p >= 0, self.forward_shape, self.reverse_shape)
         peak = np.where(p >= 0, self.max_forward_n, -self.max_reverse_n)
         return peak * s * (s + k) / (1.0 + k)
@@ -115,7 +115,7 @@ class ThrustCurve:
         forward = f >= 0
         peak = np.where(forward, self.max_forward_n, self.max_reverse_n)
         k = np.where(forward, self.forward_shape, self.reverse_shape)
-        y = np.clip(np.abs(f) / peak, 0.0, 1.0) * (1.0 + k)  # s^2 + k s = y
+        y = (np.abs(f) / peak).clip(0.0, 1.0) * (1.0 + k)  # s^2 + k s = y
         s = (-k + np.sqrt(k * k + 4.0 * y)) / 2.0
         span = (NEUTRAL_PWM_US - T200_PWM_MIN_US) - self.deadband_us
         offset = np.where(s > 0, self.deadband_us + s * span, 0.0)
@@ -134,7 +134,7 @@ def linearise_thrusters(commands, curve: ThrustCurve, pwm: PwmRange = PwmRange()
     """Thruster commands in [-1, 1] read as fractions of full forward (>= 0) or full reverse (< 0)
     thrust, turned into the commands that give those thrusts through ``curve``: thrust linearisation
     after the mixer, per thruster (ArduCopter does the same for propellers with MOT_THST_EXPO)."""
-    c = np.clip(np.asarray(commands, float), -1.0, 1.0)
+    c = np.asarray(commands, float).clip(-1.0, 1.0)
     wanted = np.where(c >= 0, c * curve.max_forward_n, c * curve.max_reverse_n)
     return np.where(c == 0, 0.0, curve.command_for_thrust(wanted, pwm))
 

@@ -48,8 +48,9 @@ entry_st = st.tuples(
     acks=st.lists(st.tuples(st.integers(0, 249), st.integers(0, 2**32 - 1)), max_size=5),
     entries=st.lists(entry_st, max_size=30),
     n_tasks=st.integers(0, 4),
+    position_cm=st.one_of(st.none(), st.tuples(*[st.integers(-32767, 32767)] * 3)),
 )
-def test_messages_round_trip_exactly(sender, seq, clocks, acks, entries, n_tasks):
+def test_messages_round_trip_exactly(sender, seq, clocks, acks, entries, n_tasks, position_cm):
     tasks = [
         Task.create(task_key(3, c), [c * 0.37, -2.5, 1.01], [1, c, -0.5], ("camera",)) for c in range(n_tasks)
     ]
@@ -62,9 +63,11 @@ def test_messages_round_trip_exactly(sender, seq, clocks, acks, entries, n_tasks
         keys=np.array([o << 16 | c for o, c, _, _ in entries], dtype=np.int64),
         winners=np.array([w for _, _, w, _ in entries], dtype=np.int64),
         bids=np.array([b for *_, b in entries]),
+        position=None if position_cm is None else tuple(v / 100.0 for v in position_cm),
     )
     data = encode(message)
     assert len(data) == size_of(len(clocks), len(acks), n_tasks, len(entries))
+    assert decode(data).position == message.position  # to the centimetre, or unknown
     back = decode(data)
     assert (back.sender, back.seq, back.acks) == (sender, seq, acks)
     assert back.clocks_ms.tolist() == clocks
@@ -104,7 +107,7 @@ def test_wrong_version_is_rejected_even_with_a_good_checksum():
     import struct
 
     body = bytearray(_a_message()[:-2])
-    body[0] = 2
+    body[0] = 1  # the version before positions
     data = bytes(body) + struct.pack("<H", binascii.crc_hqx(bytes(body), 0xFFFF))
     with pytest.raises(MessageError) as caught:
         decode(data)
@@ -567,3 +570,20 @@ def test_a_task_given_up_passes_to_another_robot_as_if_its_holder_could_not_do_i
     equipped = [replace(r, capabilities=tool) if r.index else r for r in robots]
     changed = [replace(t, requires=tool) if t.key == key else t for t in tasks]
     assert report.paths == sequential_greedy(equipped, changed, AuctionParams()).paths
+
+
+def test_an_agent_learns_where_its_teammates_are_from_their_messages():
+    from maptidal.allocation.agent import CBBAAgent
+    from maptidal.allocation.scoring import RobotProfile
+
+    a = CBBAAgent(RobotProfile("a", 0, np.array([0.0, 0.0, 1.0])))
+    b = CBBAAgent(RobotProfile("b", 1, np.array([2.0, -1.5, 0.8])))
+    assert b.receive(a.make_message(1.0), 1.2) and 0 in b.peer_positions
+    position, heard = b.peer_positions[0]
+    np.testing.assert_allclose(position, [0.0, 0.0, 1.0])
+    assert heard == 1.2
+    a.set_position([0.5, 0.25, 1.0])
+    later = 1.0 + a.params.heartbeat_s  # a heartbeat: nothing else to say
+    assert b.receive(a.make_message(later), later + 0.3)
+    np.testing.assert_allclose(b.peer_positions[0][0], [0.5, 0.25, 1.0])
+    assert b.peer_positions[0][1] == later + 0.3

@@ -192,6 +192,55 @@ def test_fusion_rejects_a_gross_outlier_and_keeps_the_rest():
     )
 
 
+def _reference_fusion(observations, gate):
+    """The fusion rule one observation at a time, written out: information-form sums per id, and a
+    chi-square gate on the residual against the current estimate."""
+    information, vector, count, accepted, rejected = {}, {}, {}, [], 0
+    for landmark, point, covariance in observations:
+        if not (np.isfinite(point).all() and np.isfinite(covariance).all()):
+            accepted.append(False)
+            continue
+        if landmark in count:
+            estimate_cov = np.linalg.inv(information[landmark])
+            residual = point - estimate_cov @ vector[landmark]
+            if residual @ np.linalg.inv(covariance + estimate_cov) @ residual > gate**2:
+                rejected += 1
+                accepted.append(False)
+                continue
+            information[landmark] = information[landmark] + np.linalg.inv(covariance)
+            vector[landmark] = vector[landmark] + np.linalg.inv(covariance) @ point
+            count[landmark] += 1
+        else:
+            information[landmark] = np.linalg.inv(covariance)
+            vector[landmark] = information[landmark] @ point
+            count[landmark] = 1
+        accepted.append(True)
+    positions = {k: np.linalg.solve(information[k], vector[k]) for k in count}
+    return accepted, rejected, positions, count
+
+
+def test_a_frame_of_many_observations_folds_in_as_the_rule_one_at_a_time():
+    rng = np.random.default_rng(4)
+    truths = rng.uniform(-2, 2, (40, 3))
+    landmarks, seen, expected_accepted = LandmarkMap(), [], []
+    for _ in range(5):
+        ids = rng.choice(40, 25, replace=False)
+        ids[:3] = ids[3]  # an id seen more than once in one call
+        covariances = np.stack([_random_covariance(rng, 0.01) for _ in ids])
+        points = np.stack(
+            [rng.multivariate_normal(truths[k], c) for k, c in zip(ids, covariances, strict=True)]
+        )
+        points[5] += [1.0, 0.0, 0.0]  # a slipped track, for the gate
+        points[6, 1] = np.nan  # a bad row
+        expected_accepted += landmarks.add(ids, points, covariances).tolist()
+        seen += list(zip(ids.tolist(), points, covariances, strict=True))
+    accepted, rejected, positions, count = _reference_fusion(seen, FusionParams().gate)
+    assert expected_accepted == accepted and landmarks.rejected == rejected > 0
+    ids = np.array(sorted(count))
+    np.testing.assert_allclose(landmarks.positions(ids), [positions[k] for k in ids], atol=1e-9)
+    assert landmarks.observations(ids).tolist() == [count[k] for k in ids]
+
+
 # ----- keyframes --------------------------------------------------------------------------------------
 def test_keyframes_follow_the_time_translation_and_rotation_thresholds():
     selector = KeyframeSelector(

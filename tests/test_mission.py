@@ -319,3 +319,46 @@ def test_after_a_failure_the_survivor_finishes_every_task_and_the_mission_ends(t
     assert orphan not in done_by_rov1
     taken = next(t for t in document["tasks"] if t["id"] == orphan)
     assert taken["assigned_to"] == "rov0" and taken["completion_time"] > 40.0 + 40.0
+
+
+def test_a_robot_keeps_clear_of_a_lower_indexed_teammate_it_has_heard_from(tmp_path):
+    from controllers.trajectory import PoseReference
+
+    scenario, _ = load_mission(None)
+    mission = Mission(scenario, MissionParams(duration_s=1.0, clearance_m=1.0, peer_fresh_s=30.0), tmp_path)
+    rov0, rov1 = mission.robots["rov0"], mission.robots["rov1"]
+    teammate = np.array([0.0, 0.0, 1.0])
+    mission.auction.agents[rov1.index].peer_positions[rov0.index] = (teammate, 10.0)
+    mission.auction.agents[rov0.index].peer_positions[rov1.index] = (teammate, 10.0)
+
+    def reference(at):
+        return PoseReference(np.asarray(at, float), np.full(3, 0.1), np.full(3, 0.01), 0.3, 0.05)
+
+    inside = mission._keep_clear(rov1, reference([0.3, 0.4, 1.0]), now=12.0)
+    np.testing.assert_allclose(inside.position, [0.6, 0.8, 1.0])  # out to the ball's surface, same bearing
+    assert inside.yaw == 0.3 and not inside.velocity.any()
+    outside = reference([1.2, 0.0, 1.0])
+    assert mission._keep_clear(rov1, outside, now=12.0) is outside
+    # rov0 yields to nobody of a higher index, and a position heard too long ago counts for nothing
+    near = reference([0.3, 0.4, 1.0])
+    assert mission._keep_clear(rov0, near, now=12.0) is near
+    assert mission._keep_clear(rov1, near, now=41.0) is near
+    kinds = [e["kind"] for e in read_events(tmp_path)]
+    assert kinds.count("yielding") == 1 and kinds.count("clear") == 1
+    mission.sim.close()
+
+
+def test_go_to_pose_streams_its_commands_at_the_command_rate(tmp_path):
+    scenario, _ = load_mission(None)
+    mission = Mission(scenario, MissionParams(duration_s=2.0, command_rate_hz=10.0), tmp_path)
+    calls = {name: 0 for name in mission.robots}
+    for name, robot in mission.robots.items():
+        update = robot.controller.update
+
+        def counted(*args, _update=update, _name=name):
+            calls[_name] += 1
+            return _update(*args)
+
+        robot.controller.update = counted
+    mission.run()
+    assert calls == {name: 20 for name in mission.robots}  # 2 s at 10 Hz, on 50 Hz physics

@@ -110,6 +110,8 @@ class CBBAAgent:
         self.auction = auction or AuctionParams()
         self.params = params or AgentParams()
         self.stats = AgentStats()
+        # robot index -> (where it last said it was, m; when that was heard, s)
+        self.peer_positions: dict[int, tuple[np.ndarray, float]] = {}
         self.tasks: list[Task] = []
         self._slot_of: dict[int, int] = {}
         self._keys = np.zeros(0, dtype=np.int64)  # task keys in slot order
@@ -426,6 +428,8 @@ class CBBAAgent:
             return False
         self._last_seq_from[sender] = message.seq
         self.stats.messages_accepted += 1
+        if message.position is not None:
+            self.peer_positions[sender] = (np.asarray(message.position, float), now_s)
         if message.has_content:
             self._ack_owed[sender] = message.seq
         self._peer_task_array(sender)
@@ -556,6 +560,7 @@ class CBBAAgent:
             keys=self._keys[entry_slots],
             winners=self.z[entry_slots],
             bids=self.y[entry_slots],
+            position=tuple(float(v) for v in self.robot.position),  # type: ignore[arg-type]
         )
         data = encode(message)
         self._sent[self._seq] = (entry_slots, self.z[entry_slots], self.y[entry_slots], record_slots)

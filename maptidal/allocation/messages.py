@@ -2,9 +2,11 @@
 
 One message is what a robot broadcasts in its transmit slot: its clock view of the team, the sequence
 numbers it acknowledges, new task records, and the bid entries that changed since its neighbours last
-acknowledged. Layout (little-endian, version 1):
+acknowledged, and where it is. Layout (little-endian, version 2):
 
     header    version u8, sender u8, seq u32, n_clocks u8
+    position  x/y/z int16 cm: where the sender was when it sent (-32768 x 3: unknown), so that teammates
+              can keep clear of it
     clocks    n_clocks x u32   last time heard of each robot, ms + 1 (0 = never)
     acks      n_acks u8, then n_acks x (robot u8, seq u32)
     tasks     n_tasks u16, then 13-byte records: origin u8, counter u16, x/y/z int16 cm,
@@ -27,7 +29,7 @@ import numpy as np
 
 from maptidal.allocation.tasks import Task
 
-VERSION = 1
+VERSION = 2
 NO_WINNER = -1
 DONE = -2
 _WIRE_NONE = 255
@@ -35,6 +37,8 @@ _WIRE_DONE = 254
 NEVER = -1  # clock value of a robot never heard of
 
 _HEADER = struct.Struct("<BBIB")
+_POSITION = struct.Struct("<3h")
+_UNKNOWN_CM = -32768
 _ACK = struct.Struct("<BI")
 _COUNT = struct.Struct("<H")
 _CRC = struct.Struct("<H")
@@ -58,7 +62,8 @@ class Message:
     """A decoded auction message.
 
     clocks_ms: int64 per robot index (NEVER = -1); acks: (robot, seq) pairs; keys/winners/bids: the bid
-    entries (winner NO_WINNER or DONE for the special codes; bids as float64 holding float32 values)."""
+    entries (winner NO_WINNER or DONE for the special codes; bids as float64 holding float32 values);
+    position: where the sender was, or None."""
 
     sender: int
     seq: int
@@ -68,6 +73,7 @@ class Message:
     keys: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     winners: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     bids: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    position: tuple[float, float, float] | None = None  # the sender's, m (to the cm on the wire)
 
     @property
     def has_content(self) -> bool:
@@ -79,6 +85,7 @@ def size_of(n_clocks: int, n_acks: int, n_tasks: int, n_entries: int) -> int:
     """Bytes of a message with these counts."""
     return (
         _HEADER.size
+        + _POSITION.size
         + 4 * n_clocks
         + 1
         + _ACK.size * n_acks
@@ -104,6 +111,7 @@ def encode(message: Message) -> bytes:
     if len(clocks) > 255 or len(message.acks) > 255:
         raise ValueError("at most 255 robots per message")
     parts = [_HEADER.pack(VERSION, message.sender, message.seq & 0xFFFFFFFF, len(clocks))]
+    parts.append(_POSITION.pack(*_position_cm(message.position)))
     parts.append((clocks + 1).astype("<u4").tobytes())
     parts.append(bytes([len(message.acks)]))
     parts.extend(_ACK.pack(robot, seq & 0xFFFFFFFF) for robot, seq in message.acks)
@@ -127,6 +135,15 @@ def encode(message: Message) -> bytes:
     return body + _CRC.pack(binascii.crc_hqx(body, 0xFFFF))
 
 
+def _position_cm(position) -> tuple[int, int, int]:
+    if position is None:
+        return (_UNKNOWN_CM,) * 3
+    values = np.asarray(position, float).reshape(3)
+    if not np.isfinite(values).all():
+        return (_UNKNOWN_CM,) * 3
+    return tuple(int(v) for v in np.clip(np.round(values * 100.0), -32767, 32767))  # type: ignore[return-value]
+
+
 def _take(data: bytes, offset: int, size: int) -> int:
     if offset + size > len(data):
         raise MessageError("truncated", f"needs {offset + size} bytes, has {len(data)}")
@@ -143,8 +160,11 @@ def decode(data: bytes) -> Message:
     version, sender, seq, n_clocks = _HEADER.unpack_from(body, 0)
     if version != VERSION:
         raise MessageError("version", f"got {version}, speak {VERSION}")
-    offset = _take(body, _HEADER.size, 4 * n_clocks)
-    clocks = np.frombuffer(body, "<u4", n_clocks, _HEADER.size).astype(np.int64) - 1
+    start = _take(body, _HEADER.size, _POSITION.size)
+    position_cm = _POSITION.unpack_from(body, _HEADER.size)
+    position = None if position_cm == (_UNKNOWN_CM,) * 3 else tuple(v / 100.0 for v in position_cm)
+    offset = _take(body, start, 4 * n_clocks)
+    clocks = np.frombuffer(body, "<u4", n_clocks, start).astype(np.int64) - 1
     start = _take(body, offset, 1)
     n_acks = body[offset]
     offset = _take(body, start, _ACK.size * n_acks)
@@ -184,4 +204,5 @@ def decode(data: bytes) -> Message:
         keys=entries["origin"].astype(np.int64) << 16 | entries["counter"].astype(np.int64),
         winners=winners,
         bids=bids,
+        position=position,  # type: ignore[arg-type]
     )

@@ -32,7 +32,7 @@ from envs.scenario import SCENARIO_DIR, Scenario, ScenarioError, read_scenario_f
 from maptidal.mission.run import MissionEvent, MissionParams, check_events
 
 DEFAULT_MISSION = SCENARIO_DIR / "mission.toml"
-MISSION_KEYS = {"duration_s", "events", "pose_source", "frame_rate_hz"}
+MISSION_KEYS = {"duration_s", "events", "pose_source", "frame_rate_hz", "command_rate_hz"}
 EVENT_KEYS = {"time_s", "kind", "robot", "current", "duration_s", "robots"}
 
 

@@ -1,8 +1,9 @@
 """The closed-loop Map-TIDAL mission (issue [mission]; the paper's Fig. 2 in our world): robots see, map,
 discover tasks, auction them over the acoustic channel, fly to them and inspect them.
 
-Every control period (the scenario's, 50 Hz) each live robot's go-to-pose controller flies its current
-activity on its own estimate, and the physics steps. The estimate is the robot's dead reckoning; a robot
+Each live robot's go-to-pose controller flies its current activity on its own estimate, streaming
+pilot commands at ``command_rate_hz`` (10 Hz) to the robot's flight mode, which runs every control period
+(the scenario's, 50 Hz) as the physics steps. The estimate is the robot's dead reckoning; a robot
 without a DVL has its horizontal position corrected by its front end's visual odometry (``vo``), and
 when no visual fix has come for ``lost_after_s`` it holds depth and heading rather than chase a goal it
 cannot tell it has reached. Every ``1 / frame_rate_hz`` seconds each
@@ -100,10 +101,20 @@ class MissionParams:
 
     duration_s: float = 240.0
     frame_rate_hz: float = 1.0
+    # go-to-pose runs on the companion computer and streams its pilot commands at 10 Hz, ArduSub's usual
+    # rate (its pilot failsafe, FS_PILOT_TIMEOUT, waits 3 s; docs/references.md); the flight mode inside
+    # the autopilot runs every control period
+    command_rate_hz: float = 10.0
     # a robot without a DVL localises by vision alone; 2 Hz keeps more of its tracks alive but did not make
     # it localise well enough (README, "Closed-loop mission") and costs a third of the real-time factor
     frame_rate_no_dvl_hz: float = 1.0
     lost_after_s: float = 3.0  # a robot without a DVL and without a visual fix this long holds still
+    # keeping clear of teammates, on where their last message said they were: two Heavy hulls (0.457 x
+    # 0.575 m, Blue Robotics' technical details) touch below 0.73 m centre to centre at worst; 1 m leaves
+    # the rest for the estimates' error. A robot yields to every teammate of a lower index heard from in
+    # the last peer_fresh_s (so two robots never both wait on each other)
+    clearance_m: float = 1.0
+    peer_fresh_s: float = 30.0
     image_size: tuple[int, int] = (320, 200)
     pose_source: str = "vo"
     explore_yaw_deg: float = 60.0
@@ -138,8 +149,15 @@ class MissionParams:
             raise ValueError(f"duration must be positive, got {self.duration_s!r}")
         if self.pose_source not in POSE_SOURCES:
             raise ValueError(f"pose source must be one of {POSE_SOURCES}, got {self.pose_source!r}")
-        if not (self.frame_rate_hz > 0 and self.dwell_s >= 0 and self.task_timeout_s > 0):
-            raise ValueError("frame_rate_hz and task_timeout_s must be positive, dwell_s >= 0")
+        if not (
+            self.frame_rate_hz > 0
+            and self.command_rate_hz > 0
+            and self.dwell_s >= 0
+            and self.task_timeout_s > 0
+        ):
+            raise ValueError(
+                "frame_rate_hz, command_rate_hz and task_timeout_s must be positive, dwell_s >= 0"
+            )
         if self.video and not (
             min(self.video_size) >= 16 and self.video_frames_per_sim_s > 0 and self.video_playback_fps > 0
         ):
@@ -172,6 +190,7 @@ class _Robot:
     fixes_seen: int = 0
     last_fix_s: float = 0.0
     lost: bool = False
+    yielding: bool = False  # holding its reference out of a teammate's clearance
     launch: tuple[np.ndarray, float] | None = None  # a joining robot's parking pose (position, yaw)
     last_left: np.ndarray | None = None  # the latest left image, for the video's inset
 
@@ -233,6 +252,7 @@ class Mission:
             self.sim.camera.baseline_m,
         )
         self.robots: dict[str, _Robot] = {}
+        self.robots_by_index: dict[int, _Robot] = {}
         profiles, joining = [], []
         for index, spec in enumerate(self.scenario.robots):
             truth = self.sim.ground_truth(spec.name)
@@ -257,6 +277,7 @@ class Mission:
                 has_dvl="dvl" in spec.sensors,
             )
             robot = self.robots[spec.name]
+            self.robots_by_index[index] = robot
             rate = params.frame_rate_hz if robot.has_dvl else params.frame_rate_no_dvl_hz
             robot.frame_every_s = 1.0 / rate
             if spec.name in joins:
@@ -301,8 +322,33 @@ class Mission:
             # no horizontal position for a while (no DVL, no visual fix): hold depth and heading, and do not
             # chase a goal the robot cannot tell it has reached (that flies it away at full speed)
             here = self._estimate(robot).position
-            position = np.r_[here[:2], reference.position[2]]
+            position = np.array([here[0], here[1], reference.position[2]])
             reference = PoseReference(position, np.zeros(3), np.zeros(3), reference.yaw, 0.0)
+        return self._keep_clear(robot, reference, now)
+
+    def _keep_clear(self, robot: _Robot, reference: PoseReference, now: float) -> PoseReference:
+        """The reference moved out of the ``clearance_m`` ball about each teammate the robot yields to
+        (MissionParams), to the nearest point of its surface: a robot whose goal lies inside waits
+        outside until the teammate's next message says it has gone."""
+        clearance = self.params.clearance_m
+        for peer, (position, heard_s) in self.auction.agents[robot.index].peer_positions.items():
+            if peer >= robot.index or now - heard_s > self.params.peer_fresh_s:
+                continue
+            offset = reference.position - position
+            distance = float(np.linalg.norm(offset))
+            if distance >= clearance:
+                continue
+            if distance < 1e-6:  # right on it: step away along the robot's own side
+                offset = self._estimate(robot).position - position
+                distance = float(np.linalg.norm(offset)) or 1.0
+            if not robot.yielding:
+                robot.yielding = True
+                self.writer.event(now, "yielding", robot=robot.name, to=self.robots_by_index[peer].name)
+            position = position + clearance * offset / distance
+            return PoseReference(position, np.zeros(3), np.zeros(3), reference.yaw, reference.yaw_rate)
+        if robot.yielding:
+            robot.yielding = False
+            self.writer.event(now, "clear", robot=robot.name)
         return reference
 
     def _lost(self, robot: _Robot, now: float) -> bool:
@@ -352,6 +398,9 @@ class Mission:
         duration_s, inspected_pct)`` is called once a simulated second."""
         p = self.params
         period = self.scenario.control_period_s
+        # the go-to-pose controller's rate: a whole number of control periods
+        command_every = period * max(1, round(1.0 / (p.command_rate_hz * period)))
+        next_command = 0.0
         frame_every = 1.0 / p.frame_rate_hz
         next_frame, next_snapshot, next_check = 0.0, p.snapshot_every_s, 0.0
         events = sorted(p.events, key=lambda e: e.time_s)
@@ -368,13 +417,20 @@ class Mission:
                 self._apply(events.pop(0), now)
             start = time.perf_counter()
             commands = {}
+            command_due = now >= next_command - 1e-9
+            if command_due:
+                next_command += command_every
             for robot in self.robots.values():
-                if robot.active:
+                if robot.active and command_due:
+                    # between commands the simulator holds each robot's last one, as ArduSub holds the
+                    # last pilot input it was streamed
                     commands[robot.name] = robot.controller.update(
-                        self._estimate(robot), self._reference(robot, now), period
+                        self._estimate(robot), self._reference(robot, now), command_every
                     )
                 elif robot.activity == "waiting":
                     self.sim.place(robot.name, robot.launch[0], robot.launch[1])  # parked, at rest
+                elif robot.activity == "failed":
+                    commands[robot.name] = np.zeros(6)
             self.timing["control"] += time.perf_counter() - start
             start = time.perf_counter()
             self.sim.step(commands)

@@ -75,33 +75,47 @@ class LandmarkMap:
         return len(self._count)
 
     def add(self, ids: np.ndarray, points_world: np.ndarray, covariances_world: np.ndarray) -> np.ndarray:
-        """Fold in one frame's observations; returns which were accepted ``(N,)``."""
+        """Fold in one frame's observations; returns which were accepted ``(N,)``. Rows with NaNs are
+        skipped; an id seen twice in one call is folded in twice, in order."""
         ids = np.asarray(ids, int).reshape(-1)
         points = np.asarray(points_world, float).reshape(-1, 3)
         covariances = np.asarray(covariances_world, float).reshape(-1, 3, 3)
         accepted = np.zeros(len(ids), bool)
-        for row, landmark in enumerate(ids.tolist()):
-            point, covariance = points[row], covariances[row]
-            if not (np.all(np.isfinite(point)) and np.all(np.isfinite(covariance))):
-                continue
-            information = np.linalg.inv(covariance)
-            if landmark in self._count and self.params.enabled:
-                if self._count[landmark] >= 1 and self.params.gate > 0:
-                    estimate_cov = np.linalg.inv(self._information[landmark])
-                    residual = point - estimate_cov @ self._vector[landmark]
-                    distance2 = residual @ np.linalg.solve(covariance + estimate_cov, residual)
-                    if distance2 > self.params.gate**2:
-                        self.rejected += 1
-                        continue
-                self._information[landmark] = self._information[landmark] + information
-                self._vector[landmark] = self._vector[landmark] + information @ point
+        rows = np.flatnonzero(np.isfinite(points).all(axis=1) & np.isfinite(covariances).all(axis=(1, 2)))
+        while len(rows):
+            # a batch of distinct ids at a time (one frame's ids are distinct: one batch)
+            _, first = np.unique(ids[rows], return_index=True)
+            batch = rows[np.sort(first)]
+            accepted[batch] = self._add_distinct(ids[batch], points[batch], covariances[batch])
+            rows = np.setdiff1d(rows, batch, assume_unique=True)
+        return accepted
+
+    def _add_distinct(self, ids: np.ndarray, points: np.ndarray, covariances: np.ndarray) -> np.ndarray:
+        # every matrix operation batched over the observations: a frame has a few hundred
+        information = np.linalg.inv(covariances)
+        vectors = np.einsum("nij,nj->ni", information, points)
+        known = np.array([k in self._count for k in ids.tolist()], bool) & self.params.enabled
+        keep = np.ones(len(ids), bool)
+        if self.params.gate > 0 and known.any():
+            rows = np.flatnonzero(known)
+            estimate_cov = np.linalg.inv(np.stack([self._information[k] for k in ids[rows].tolist()]))
+            fused = np.stack([self._vector[k] for k in ids[rows].tolist()])
+            residual = points[rows] - np.einsum("nij,nj->ni", estimate_cov, fused)
+            weighted = np.linalg.solve(covariances[rows] + estimate_cov, residual[..., None])[..., 0]
+            outside = np.einsum("ni,ni->n", residual, weighted) > self.params.gate**2
+            keep[rows[outside]] = False
+            self.rejected += int(outside.sum())
+        for row in np.flatnonzero(keep).tolist():
+            landmark = int(ids[row])
+            if known[row]:
+                self._information[landmark] = self._information[landmark] + information[row]
+                self._vector[landmark] = self._vector[landmark] + vectors[row]
                 self._count[landmark] += 1
             else:
-                self._information[landmark] = information
-                self._vector[landmark] = information @ point
+                self._information[landmark] = information[row]
+                self._vector[landmark] = vectors[row]
                 self._count[landmark] = 1
-            accepted[row] = True
-        return accepted
+        return keep
 
     def positions(self, ids: np.ndarray) -> np.ndarray:
         """Fused positions ``(N, 3)`` of ``ids``; NaN rows for ids never observed."""
