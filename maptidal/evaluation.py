@@ -40,6 +40,7 @@ from maptidal.keyframes import (
     keyframes_at,
     paper_capture_poses,
 )
+from maptidal.perception.mesher import MesherParams
 from maptidal.progress import ProgressBar
 from maptidal.tank import TankModel, load_tank_config
 
@@ -80,6 +81,8 @@ class EvaluationConfig:
     # Kimera-like landmark fusion over the frames they are tracked in (on by default; off: one
     # triangulation per keyframe)
     refinement: RefinementParams = field(default_factory=lambda: RefinementParams(enabled=True))
+    # the keyframe mesher's bad-triangle thresholds (Kimera's shipped configs by default)
+    mesher: MesherParams = field(default_factory=MesherParams)
 
     def __post_init__(self) -> None:
         if self.capture not in CAPTURE_PATHS:
@@ -110,6 +113,7 @@ def config_keyframes(tank: TankModel, config: EvaluationConfig) -> list[Keyframe
         camera=config.camera,
         seed=config.seed,
         refinement=config.refinement,
+        mesher=config.mesher,
     )
 
 
@@ -142,6 +146,21 @@ def landmark_noise_curve(config: EvaluationConfig, levels: tuple[float, ...]) ->
     return rows
 
 
+def surface_looks(tank: TankModel) -> np.ndarray:
+    """``(S, 3)``: the direction of looking straight at each wall segment and at the floor."""
+    return np.array([-seg.inward_normal for seg in tank.segments] + [np.array([0.0, 0.0, -1.0])])
+
+
+def surface_aligned_count(tank: TankModel, viewpoints: np.ndarray, angle_rad: float) -> int:
+    """How many viewpoints ``(N, 6)`` look within ``angle_rad`` of straight at a wall or the floor: the
+    tasks that came from faces lying on one surface, as against faces bridging two (or tilted by noise)."""
+    rows = np.asarray(viewpoints, float).reshape(-1, 6)
+    if len(rows) == 0:
+        return 0
+    directions = rows[:, 3:] / np.linalg.norm(rows[:, 3:], axis=1, keepdims=True)
+    return int(np.count_nonzero((directions @ surface_looks(tank).T).max(axis=1) > np.cos(angle_rad)))
+
+
 def wall_aligned_fraction(tank: TankModel, keyframes: list[Keyframe], angle_rad: float) -> float:
     """Fraction of all keyframe faces whose view direction is within ``angle_rad`` of
     looking straight at a wall or the floor.
@@ -151,8 +170,7 @@ def wall_aligned_fraction(tank: TankModel, keyframes: list[Keyframe], angle_rad:
     triangles bridging the ladder and the wall, the window recess, the floor line)
     each tend to become tasks.
     """
-    looks = [-seg.inward_normal for seg in tank.segments] + [np.array([0.0, 0.0, -1.0])]
-    looks = np.array(looks)
+    looks = surface_looks(tank)
     aligned = total = 0
     for keyframe in keyframes:
         v, f = keyframe.mesh.vertices, keyframe.mesh.faces
@@ -298,10 +316,15 @@ def run_compare(
         "n_voxels": len(model.voxels),
         "coverage": {**config.coverage.__dict__},
         "discovery": config.discovery.to_dict(),
+        "mesher": {**config.mesher.__dict__},
         "keyframes": run.frames,
         "keyframes_rendered": None if rendered_run is None else rendered_run.frames,
         "faces_within_theta_ex_of_a_surface_normal": wall_aligned_fraction(
             tank, keyframes, config.discovery.theta_ex
+        ),
+        # of Map-TIDAL's tasks, those looking within theta_ex of straight at a wall or the floor
+        "maptidal_tasks_within_theta_ex_of_a_surface_normal": surface_aligned_count(
+            tank, viewpoints["maptidal"], config.discovery.theta_ex
         ),
         "reports": {name: report.to_dict() for name, report in reports.items()},
         # where each method's tasks lie (maptidal.free_space), whether or not the check was on
@@ -355,7 +378,10 @@ def compare_report(document: dict, plots: bool) -> str:
         "",
         f"Keyframe faces whose view direction is within theta_ex of a wall or floor normal: "
         f"{100 * document['faces_within_theta_ex_of_a_surface_normal']:.0f}%. Discovery excludes a CIP "
-        "only near a task of similar direction, so the other faces tend to add tasks.",
+        "only near a task of similar direction, so the other faces tend to add tasks: "
+        f"{document['maptidal_tasks_within_theta_ex_of_a_surface_normal']} of the "
+        f"{document['methods']['maptidal']['tasks']} Map-TIDAL tasks look within theta_ex of "
+        "straight at a surface.",
         "",
         "Where the Map-TIDAL tasks lie (free space check "
         f"{'on: the others were dropped' if document['free_space']['check'] else 'off, as the paper'}): "

@@ -15,6 +15,7 @@ from maptidal.evaluation import (
     parse_grid,
     run_compare,
     run_sweep,
+    surface_aligned_count,
 )
 from maptidal.files import load_tasks, save_tasks
 from maptidal.keyframes import ExplorationParams, exploration_keyframes
@@ -127,3 +128,47 @@ def test_every_command_has_help(command, capsys):
         main([command, "--help"])
     assert exit_info.value.code == 0
     assert "usage: maptidal " + command in capsys.readouterr().out
+
+
+def test_tasks_looking_straight_at_a_surface_are_told_from_tilted_ones():
+    tank = TankModel()
+    end_wall = tank.segments[len(tank.segments) // 2]
+    look = -end_wall.inward_normal
+    standing = end_wall.start + 0.5 * (end_wall.end - end_wall.start) + end_wall.inward_normal[:2]
+    tilt = np.radians(10.0)  # within theta_ex = 0.25 rad; 20 degrees is not
+    rotate = np.array([[np.cos(tilt), -np.sin(tilt), 0], [np.sin(tilt), np.cos(tilt), 0], [0, 0, 1]])
+    rows = np.array(
+        [
+            np.r_[standing, 1.0, look],
+            np.r_[standing, 1.0, rotate @ look],
+            np.r_[standing, 1.0, rotate @ rotate @ look],
+            np.r_[standing, 1.0, 0.0, 0.0, -2.0],  # straight down at the floor (any length)
+            np.r_[standing, 1.0, 0.0, 0.0, 1.0],  # up at the surface, which is not evaluated
+        ]
+    )
+    assert surface_aligned_count(tank, rows, 0.25) == 3
+    assert surface_aligned_count(tank, rows[:0], 0.25) == 0
+
+
+def test_kimeras_code_default_thresholds_reject_more_keyframe_triangles():
+    from maptidal.perception.mesher import MesherParams
+
+    assert MesherParams.preset("configs") == MesherParams()
+    strict = MesherParams.preset("code-defaults")
+    assert (
+        strict.min_ratio_largest_smallest_side,
+        strict.min_elongation_ratio,
+        strict.max_triangle_side_m,
+    ) == (
+        0.5,
+        0.5,
+        0.5,
+    )
+    with pytest.raises(ValueError, match="unknown mesher preset"):
+        MesherParams.preset("euroc")
+    loose = run_compare(None, EvaluationConfig(), plots=False, progress=False)
+    tight = run_compare(None, EvaluationConfig(mesher=strict), plots=False, progress=False)
+    assert tight["mesher"]["max_triangle_side_m"] == 0.5
+    faces = [sum(f["faces"] for f in document["keyframes"]) for document in (loose, tight)]
+    assert faces[1] < faces[0]
+    assert tight["methods"]["maptidal"]["tasks"] < loose["methods"]["maptidal"]["tasks"]

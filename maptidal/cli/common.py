@@ -261,14 +261,23 @@ def jobs_for(args: argparse.Namespace, runs: int, command: str) -> int:
 
 
 def add_capture_args(parser: argparse.ArgumentParser, refinement: bool = True) -> None:
-    """``--capture paper|sweep`` (the synthetic keyframes' path) and, with ``refinement``,
-    ``--no-refinement`` (one triangulation per keyframe instead of Kimera-like landmark fusion)."""
+    """``--capture paper|sweep`` (the synthetic keyframes' path), ``--mesher configs|code-defaults`` (the
+    mesher's thresholds) and, with ``refinement``, ``--no-refinement`` (one triangulation per keyframe
+    instead of Kimera-like landmark fusion)."""
     parser.add_argument(
         "--capture",
         choices=("paper", "sweep"),
         default="paper",
         help="keyframes: the paper's protocol, 7 keyframes rising 0.5 m 1 m in front of the end wall "
         "(paper, default), or two yaw sweeps from the centre line 1.5 m from it (sweep)",
+    )
+    parser.add_argument(
+        "--mesher",
+        choices=("configs", "code-defaults"),
+        default="configs",
+        help="the synthetic keyframes' mesher thresholds for bad triangles, two readings of Kimera-VIO: "
+        "the flag files it ships (configs, default: side ratio 0.2, elongation 0.2, longest side 2 m) or "
+        "its code's own defaults (code-defaults: 0.5, 0.5, 0.5 m)",
     )
     if refinement:
         parser.add_argument(

@@ -237,6 +237,7 @@ def run_noise_curve(args: argparse.Namespace) -> int:
 def _evaluation_config(args: argparse.Namespace):
     from maptidal.evaluation import EvaluationConfig
     from maptidal.keyframes import RefinementParams
+    from maptidal.perception.mesher import MesherParams
 
     discovery = discovery_params_from(args)
     return EvaluationConfig(
@@ -247,6 +248,7 @@ def _evaluation_config(args: argparse.Namespace):
         free_space=args.free_space,
         capture=args.capture,
         refinement=RefinementParams(enabled=getattr(args, "refinement", True)),
+        mesher=MesherParams.preset(args.mesher),
     )
 
 

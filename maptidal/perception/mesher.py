@@ -30,6 +30,23 @@ class MesherParams:
     min_elongation_ratio: float = 0.2
     max_triangle_side_m: float = 2.0
 
+    @classmethod
+    def preset(cls, name: str) -> MesherParams:
+        """A named reading of Kimera-VIO's thresholds (:data:`MESHER_PRESETS`)."""
+        try:
+            return MESHER_PRESETS[name]
+        except KeyError:
+            raise ValueError(f"unknown mesher preset {name!r}; known: {', '.join(MESHER_PRESETS)}") from None
+
+
+# Kimera-VIO's two sets of bad-triangle thresholds, neither of which the paper names: the flag files its
+# launch files ship (``configs``: 0.2, 0.2, 2.0 m; our default) and the gflags defaults in its code
+# (``code-defaults``: 0.5, 0.5, 0.5 m; DEFINE_double in Kimera-VIO's Mesher and its parameter docs)
+MESHER_PRESETS: dict[str, MesherParams] = {
+    "configs": MesherParams(0.2, 0.2, 2.0),
+    "code-defaults": MesherParams(0.5, 0.5, 0.5),
+}
+
 
 @dataclass
 class KeyframeMesh:
