@@ -362,3 +362,18 @@ def test_go_to_pose_streams_its_commands_at_the_command_rate(tmp_path):
         robot.controller.update = counted
     mission.run()
     assert calls == {name: 20 for name in mission.robots}  # 2 s at 10 Hz, on 50 Hz physics
+
+
+def test_a_robot_keeps_clear_of_two_teammates_at_once(tmp_path):
+    from controllers.trajectory import PoseReference
+
+    scenario = _third_robot(load_mission(None)[0])
+    mission = Mission(scenario, MissionParams(duration_s=1.0, clearance_m=1.0), tmp_path)
+    last = mission.robots_by_index[2]
+    peers = mission.auction.agents[2].peer_positions
+    peers[0], peers[1] = (np.array([0.0, 0.0, 1.0]), 5.0), (np.array([1.2, 0.0, 1.0]), 5.0)
+    goal = PoseReference(np.array([0.6, 0.1, 1.0]), np.zeros(3), np.zeros(3), 0.0, 0.0)
+    moved = mission._keep_clear(last, goal, now=6.0).position
+    for position, _ in peers.values():
+        assert np.linalg.norm(moved - position) >= 1.0 - 1e-9
+    mission.sim.close()

@@ -329,27 +329,37 @@ class Mission:
     def _keep_clear(self, robot: _Robot, reference: PoseReference, now: float) -> PoseReference:
         """The reference moved out of the ``clearance_m`` ball about each teammate the robot yields to
         (MissionParams), to the nearest point of its surface: a robot whose goal lies inside waits
-        outside until the teammate's next message says it has gone."""
+        outside until the teammate's next message says it has gone. With several such teammates the
+        balls are visited in turn, a few rounds at most (where they overlap, the last one wins)."""
         clearance = self.params.clearance_m
-        for peer, (position, heard_s) in self.auction.agents[robot.index].peer_positions.items():
-            if peer >= robot.index or now - heard_s > self.params.peer_fresh_s:
-                continue
-            offset = reference.position - position
-            distance = float(np.linalg.norm(offset))
-            if distance >= clearance:
-                continue
-            if distance < 1e-6:  # right on it: step away along the robot's own side
-                offset = self._estimate(robot).position - position
-                distance = float(np.linalg.norm(offset)) or 1.0
-            if not robot.yielding:
-                robot.yielding = True
-                self.writer.event(now, "yielding", robot=robot.name, to=self.robots_by_index[peer].name)
-            position = position + clearance * offset / distance
-            return PoseReference(position, np.zeros(3), np.zeros(3), reference.yaw, reference.yaw_rate)
-        if robot.yielding:
-            robot.yielding = False
-            self.writer.event(now, "clear", robot=robot.name)
-        return reference
+        peers = [
+            (peer, position)
+            for peer, (position, heard_s) in self.auction.agents[robot.index].peer_positions.items()
+            if peer < robot.index and now - heard_s <= self.params.peer_fresh_s
+        ]
+        target, blocking = reference.position, None
+        for _ in range(3):
+            moved = False
+            for peer, position in peers:
+                offset = target - position
+                distance = float(np.linalg.norm(offset))
+                if distance >= clearance - 1e-9:
+                    continue
+                if distance < 1e-6:  # right on it: step away along the robot's own side
+                    offset = self._estimate(robot).position - position
+                    distance = float(np.linalg.norm(offset)) or 1.0
+                target, blocking, moved = position + clearance * offset / distance, peer, True
+            if not moved:
+                break
+        if blocking is None:
+            if robot.yielding:
+                robot.yielding = False
+                self.writer.event(now, "clear", robot=robot.name)
+            return reference
+        if not robot.yielding:
+            robot.yielding = True
+            self.writer.event(now, "yielding", robot=robot.name, to=self.robots_by_index[blocking].name)
+        return PoseReference(target, np.zeros(3), np.zeros(3), reference.yaw, reference.yaw_rate)
 
     def _lost(self, robot: _Robot, now: float) -> bool:
         """A robot without a DVL whose visual odometry has not fixed its position for ``lost_after_s``."""
