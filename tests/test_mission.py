@@ -47,6 +47,7 @@ def test_a_short_mission_discovers_allocates_and_completes_tasks(short_mission):
     captured = [e["task"] for e in events if e["kind"] == "done"]
     assert len(captured) == len(set(captured)) == len(done)
     assert isinstance(document["allocation_conflicts"], int)
+    assert document["duplicate_inspections"] == len(captured) - len(set(captured)) == 0
     kinds = {e["kind"] for e in events}
     assert {"start", "keyframe", "discovered", "flying", "done", "end"} <= kinds
     assert document["coverage"]["occluded"]["n_viewpoints"] == len(done)
@@ -113,6 +114,8 @@ def test_a_killed_mission_leaves_a_log_the_report_rebuilds(tmp_path):
     rebuilt = json.loads((tmp_path / "mission.json").read_text())
     assert rebuilt["rebuilt_from_events"] and not rebuilt["finished"]
     assert any(t["completed"] for t in rebuilt["tasks"])
+    done_events = [e["task"] for e in read_events(tmp_path) if e["kind"] == "done"]
+    assert rebuilt["duplicate_inspections"] == len(done_events) - len(set(done_events))
     assert rebuilt["coverage"]["occluded"]["n_viewpoints"] >= 1
     assert (tmp_path / "report.md").is_file() and (tmp_path / "top_view.png").is_file()
 

@@ -291,6 +291,7 @@ class Mission:
             ("physics", "rendering", "perception", "discovery", "allocation", "control"), 0.0
         )
         self.captured: list[np.ndarray] = []  # the true camera viewpoints where images were captured
+        self.inspections: dict[int, int] = {}  # task key -> images captured of it
         self.video = MissionVideo(self, params) if params.video else None
         # what the captured views have inspected so far (occlusion on), for the progress bar and snapshots
         self.seen = SeenVoxels(CoverageModel.from_tank(self.scenario.tank, CoverageParams(occlusion=True)))
@@ -627,6 +628,7 @@ class Mission:
         image = self.writer.image(f"task_{key}_{robot.name}.png", left)
         truth = self._camera_pose(robot, "truth")
         self.captured.append(np.r_[truth.position, truth.forward])
+        self.inspections[key] = self.inspections.get(key, 0) + 1
         self.auction.agents[robot.index].mark_done(key, now)
         record = self.tasks.setdefault(key, {"id": key})
         record.update(completed=True, completion_time=round(now, 3), image=image, assigned_to=robot.name)
@@ -677,6 +679,8 @@ class Mission:
                 "half_duplex": stats.half_duplex,
             },
             "allocation_conflicts": conflicts,
+            # captures of a task already captured (by this robot or another): what a conflict costs
+            "duplicate_inspections": sum(n - 1 for n in self.inspections.values()),
             "tasks": sorted(self.tasks.values(), key=lambda t: t["id"]),
             "timing": dict(self.timing),
         }
