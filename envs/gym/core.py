@@ -179,9 +179,9 @@ class MapTidalEnv(gymnasium.Env):
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {a.shape}")
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise ValueError(f"action must be finite, got {a.tolist()}")
-        a = np.clip(a, -1.0, 1.0)
+        a = a.clip(-1.0, 1.0)
         mode = "thrusters" if self.options.action == "thrusters" else "pilot"
         energy = 0.0
         for _ in range(self.substeps):

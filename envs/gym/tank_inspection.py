@@ -61,7 +61,7 @@ class WallCoverage:
         """``(1 + SECTORS,)``: the share seen overall, then per sector (recounted only after news)."""
         if self._summary is None:
             per_sector = np.bincount(self._sector[self.seen], minlength=SECTORS) / self._sector_size
-            self._summary = np.r_[self.seen.mean(), per_sector]
+            self._summary = np.concatenate(([self.seen.mean()], per_sector))
         return self._summary.copy()
 
 
@@ -145,4 +145,5 @@ class TankInspectionEnv(MapTidalEnv):
         terminated = bool(self.sim.contacts() or self._out_of_bounds(truth))
         if terminated:
             reward -= 10.0
-        return reward, terminated, {"new_voxels": new, "coverage": float(self.seen.mean())}
+        # the summary's first entry is the share seen (recounted only after news)
+        return reward, terminated, {"new_voxels": new, "coverage": float(self.walls.summary()[0])}
