@@ -105,8 +105,9 @@ class MissionParams:
     # rate (its pilot failsafe, FS_PILOT_TIMEOUT, waits 3 s; docs/references.md); the flight mode inside
     # the autopilot runs every control period
     command_rate_hz: float = 10.0
-    # a robot without a DVL localises by vision alone; 2 Hz keeps more of its tracks alive but did not make
-    # it localise well enough (README, "Closed-loop mission") and costs a third of the real-time factor
+    # the frame rate of a robot without a DVL, whose visual odometry corrects its model-aided dead
+    # reckoning: in session 9, before the motion model, 2 Hz kept more tracks alive but did not make it
+    # localise well enough and cost a third of the real-time factor
     frame_rate_no_dvl_hz: float = 1.0
     lost_after_s: float = 3.0  # a robot without a DVL and without a visual fix this long holds still
     # keeping clear of teammates, on where their last message said they were: two Heavy hulls (0.457 x
