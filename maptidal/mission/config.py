@@ -2,6 +2,10 @@
 
     [mission]
     duration_s = 180
+    pose_source = "vo"     # what the front end meshes on: truth, dr or vo
+    frame_rate_hz = 1.0    # stereo frames per robot per second
+    command_rate_hz = 10.0 # go-to-pose's pilot commands per second
+    clearance_m = 1.0      # how far a robot keeps from lower-indexed teammates (0: not at all)
     [[mission.events]]
     time_s = 60
     kind = "fail"          # rov1 stops and falls silent
@@ -32,7 +36,7 @@ from envs.scenario import SCENARIO_DIR, Scenario, ScenarioError, read_scenario_f
 from maptidal.mission.run import MissionEvent, MissionParams, check_events
 
 DEFAULT_MISSION = SCENARIO_DIR / "mission.toml"
-MISSION_KEYS = {"duration_s", "events", "pose_source", "frame_rate_hz", "command_rate_hz"}
+MISSION_KEYS = {"duration_s", "events", "pose_source", "frame_rate_hz", "command_rate_hz", "clearance_m"}
 EVENT_KEYS = {"time_s", "kind", "robot", "current", "duration_s", "robots"}
 
 
@@ -47,6 +51,11 @@ def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
     if not isinstance(table, dict) or set(table) - MISSION_KEYS:
         raise ValueError(f"{path}: [mission] takes only {', '.join(sorted(MISSION_KEYS))}")
     settings = {key: value for key, value in table.items() if key != "events"}
+    for key, value in settings.items():
+        wanted = str if key == "pose_source" else (int, float)
+        if not isinstance(value, wanted) or isinstance(value, bool):
+            kind = "a string" if wanted is str else "a number"
+            raise ValueError(f"{path}: [mission] {key} must be {kind}, got {value!r}")
     events = []
     for number, entry in enumerate(table.get("events", [])):
         if (

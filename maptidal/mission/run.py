@@ -159,6 +159,8 @@ class MissionParams:
             raise ValueError(
                 "frame_rate_hz, command_rate_hz and task_timeout_s must be positive, dwell_s >= 0"
             )
+        if not (math.isfinite(self.clearance_m) and self.clearance_m >= 0):
+            raise ValueError(f"clearance_m must be finite and >= 0, got {self.clearance_m!r}")
         if self.video and not (
             min(self.video_size) >= 16 and self.video_frames_per_sim_s > 0 and self.video_playback_fps > 0
         ):
