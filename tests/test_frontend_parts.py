@@ -313,3 +313,14 @@ def test_without_a_dvl_or_a_motion_model_vision_carries_the_horizontal_motion_al
     visual = start.rotation @ np.array([0.0, -0.2, 0.1])
     expected = start.position + [visual[0], visual[1], 0.25 * visual[2] + 0.75 * 0.1]
     np.testing.assert_allclose(fused.position, expected, atol=1e-12)
+
+
+def test_a_frame_a_whole_interval_on_is_a_keyframe_though_its_time_is_a_sum_of_steps():
+    selector = KeyframeSelector(KeyframeParams(min_interval_s=1.0, max_interval_s=1.0))
+    pose = _pose(0.0)
+    time_s, chosen = 0.0, []
+    for step in range(1, 501):  # 10 s of 20 ms physics steps, a frame every 50 of them
+        time_s += 0.02  # summed as a simulation does: the frame times fall a hair off whole seconds
+        if step % 50 == 0:
+            chosen.append(selector.is_keyframe(time_s, pose))
+    assert chosen == [True] * 10

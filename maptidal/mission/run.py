@@ -129,11 +129,14 @@ class MissionParams:
     channel: ChannelParams = field(default_factory=ChannelParams)
     agent: AgentParams = field(default_factory=lambda: AgentParams(failure_timeout_s=40.0, heartbeat_s=10.0))
     discovery: DiscoveryParams = field(default_factory=DiscoveryParams)
-    # a keyframe per 25 cm or 20 deg (at most one a second): discovery on every 8 cm of a slow rise, as on
-    # the paper's protocol, would flood a 500 bit/s channel with tasks
+    # a keyframe per 25 cm or 20 deg (at most one a second: 25 cm at the 0.25 m/s cruise), and one every
+    # 4 s while the view stands still, since a hovering robot's keyframes see what it saw and add tasks only
+    # from the mesh noise; discovery on every 8 cm of a slow rise, as on the paper's protocol, or on every
+    # frame would flood the 500 bit/s channel with tasks (README, "Closed-loop mission"). Until session 10
+    # the selector dropped frames a hair short of an interval, so the intervals were 1-2 s and 2-3 s
     keyframes: KeyframeParams = field(
         default_factory=lambda: KeyframeParams(
-            min_interval_s=1.0, min_translation_m=0.25, min_rotation_deg=20.0
+            min_interval_s=1.0, max_interval_s=4.0, min_translation_m=0.25, min_rotation_deg=20.0
         )
     )
     events: tuple[MissionEvent, ...] = ()

@@ -21,6 +21,8 @@ import numpy as np
 
 from maptidal.perception.recording import CameraPose
 
+_TIME_SLACK_S = 1e-6
+
 
 @dataclass(frozen=True)
 class KeyframeParams:
@@ -57,7 +59,9 @@ class KeyframeSelector:
         p = self.params
         if self._last is not None:
             last_time, last_pose = self._last
-            elapsed = time_s - last_time
+            # a microsecond's slack: frame times that are sums of physics steps come out a hair short
+            # of a whole interval (0.9999999999999998 s), which would drop every other keyframe
+            elapsed = time_s - last_time + _TIME_SLACK_S
             if elapsed < p.min_interval_s:
                 return False
             moved = float(np.linalg.norm(pose.position - last_pose.position)) >= p.min_translation_m

@@ -9,8 +9,10 @@ perception, discovery, allocation or control.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -18,6 +20,7 @@ from envs.rendering import describe_renderer
 from envs.simulation import Simulation
 from maptidal.camera import StereoCameraParams
 from maptidal.mission.config import prepare_mission
+from maptidal.mission.outputs import read_events
 from maptidal.mission.run import Mission
 
 
@@ -49,13 +52,24 @@ def main() -> None:
     )
     parser.add_argument("--duration", type=float, default=120.0, help="simulated seconds (default 120)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--keyframe-every-frame",
+        action="store_true",
+        help="make every stereo frame a keyframe (1 Hz per robot) rather than the mission's motion "
+        "thresholds (a keyframe per 25 cm or 20 deg, at least every 2 s)",
+    )
     args = parser.parse_args()
     scenario, params = prepare_mission(None, duration_s=args.duration, seed=args.seed)
+    if args.keyframe_every_frame:
+        every = 1.0 / params.frame_rate_hz
+        keyframes = dataclasses.replace(params.keyframes, min_interval_s=every, max_interval_s=every)
+        params = dataclasses.replace(params, keyframes=keyframes)
     floor = floor_factor(scenario, params, args.duration)
-    with tempfile.TemporaryDirectory() as out:
-        mission = Mission(scenario, params, out)
-        renderer = describe_renderer(mission.sim.model, params.image_size[1], params.image_size[0])
-        document = mission.run()
+    scratch = tempfile.TemporaryDirectory()
+    out_dir = Path(scratch.name)
+    mission = Mission(scenario, params, out_dir)
+    renderer = describe_renderer(mission.sim.model, params.image_size[1], params.image_size[0])
+    document = mission.run()
     timing = document["timing"]
     wall = document["wall_time_s"]
     print(f"renderer: {renderer}")
@@ -71,8 +85,13 @@ def main() -> None:
         print(f"  {name:<11} {seconds:6.2f} s  {100 * seconds / wall:5.1f} %")
     rest = wall - sum(timing.values())
     print(f"  {'the loop':<11} {rest:6.2f} s  {100 * rest / wall:5.1f} %  (activities, logs, snapshots)")
+    events = read_events(out_dir)
+    for robot in mission.robots:
+        count = sum(1 for e in events if e["kind"] == "keyframe" and e["robot"] == robot)
+        print(f"keyframes, {robot}: {count} ({count / document['sim_time_s']:.2f} Hz)")
     done = sum(1 for t in document["tasks"] if t["completed"])
     print(f"tasks found {len(document['tasks'])}, done {done}; messages {document['comms']['messages']}")
+    scratch.cleanup()
 
 
 if __name__ == "__main__":
