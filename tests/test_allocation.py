@@ -587,3 +587,22 @@ def test_an_agent_learns_where_its_teammates_are_from_their_messages():
     assert b.receive(a.make_message(later), later + 0.3)
     np.testing.assert_allclose(b.peer_positions[0][0], [0.5, 0.25, 1.0])
     assert b.peer_positions[0][1] == later + 0.3
+
+
+def test_a_full_message_carries_the_done_tasks_then_the_path_in_flying_order():
+    robots, tasks = random_instance(2, 30, 5)
+    agent = CBBAAgent(robots[0])
+    peer = CBBAAgent(robots[1])
+    agent.add_tasks(tasks)
+    peer.add_tasks(tasks)
+    peer.receive(agent.make_message(0.0), 0.1)  # the peer is heard of, so entries are owed to it
+    agent.receive(peer.make_message(0.2), 0.3)
+    agent.build_bundle(1.0)
+    assert len(agent.path_keys()) >= 3
+    done = agent.path_keys()[-1]
+    agent.mark_done(done, 2.0)
+    path = agent.path_keys()
+    # room for the header, one clock and three entries: what goes first is what matters most
+    data = agent.make_message(3.0, capacity_bytes=size_of(2, 1, 0, 3))
+    sent = decode(data).keys.tolist()
+    assert sent == [done, path[0], path[1]]

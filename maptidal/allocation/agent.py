@@ -546,7 +546,7 @@ class CBBAAgent:
         while acks and size_of(n_clocks, len(acks), 0, 0) > budget:
             acks.pop()  # the rest stay owed for the next slot
         entry_slots = np.flatnonzero(entries)
-        entry_slots = entry_slots[np.argsort(-self._version[entry_slots], kind="stable")]
+        entry_slots = self._by_urgency(entry_slots)
         record_slots = np.flatnonzero(records)
         if size_of(n_clocks, len(acks), len(record_slots), len(entry_slots)) > budget:
             record_slots, entry_slots = self._fit(budget, n_clocks, len(acks), records, entry_slots)
@@ -580,8 +580,23 @@ class CBBAAgent:
         self.stats.bytes_sent += len(data)
         return data
 
+    def _by_urgency(self, entry_slots: np.ndarray) -> np.ndarray:
+        """The entries to send in the order they should go when a message cannot hold them all: tasks done
+        first (news that keeps a teammate from inspecting one again), then this robot's path in the order
+        it will fly it (a claim its teammates should hear before they set out too), then the rest newest
+        first."""
+        rank = np.full(len(entry_slots), len(self.path) + 1, np.int64)
+        position = {slot: n for n, slot in enumerate(self.path)}
+        for row, slot in enumerate(entry_slots.tolist()):
+            if self.z[slot] == DONE:
+                rank[row] = -1
+            elif slot in position:
+                rank[row] = position[slot]
+        return entry_slots[np.lexsort((-self._version[entry_slots], rank))]
+
     def _fit(self, budget: float, n_clocks: int, n_acks: int, records: np.ndarray, entry_slots: np.ndarray):
-        """Entries (newest first) and the records they need, then other records, within budget."""
+        """Entries (in :meth:`_by_urgency` order) and the records they need, then other records, within
+        budget."""
         chosen_records: list[int] = []
         chosen_entries: list[int] = []
         in_records = set()
