@@ -41,9 +41,9 @@ def classify_tasks(
     labels[(labels == "free") & ~water_side] = "behind_wall"
     directions = tasks[:, 3:] / np.linalg.norm(tasks[:, 3:], axis=1, keepdims=True)
     targets = positions + standoff_m * directions
-    triangles = tank.scene_triangles()
+    occluders = tank.scene_occluders  # prepared once per tank: a mission asks at every keyframe
     for k in np.flatnonzero(labels == "free"):
-        if not visible_from(positions[k], targets[k : k + 1], triangles, tolerance_m)[0]:
+        if not visible_from(positions[k], targets[k : k + 1], occluders, tolerance_m)[0]:
             labels[k] = "no_line_of_sight"
     return labels
 

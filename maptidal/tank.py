@@ -19,6 +19,7 @@ the end wall (the wall lies in ``x = 0``), y to the left when facing it, z up.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -28,6 +29,7 @@ import numpy as np
 import trimesh
 
 from maptidal.paths import asset
+from maptidal.raycast import Occluders
 
 DEFAULT_TANK_CONFIG = asset("osb_tank", "tank.toml")
 
@@ -510,6 +512,11 @@ class TankModel:
             )
             quads.append((corners, np.array([0.0, 0.0, 1.0]), "floor"))
         return quads
+
+    @functools.cached_property
+    def scene_occluders(self) -> Occluders:
+        """:meth:`scene_triangles` (floor and ladder included) prepared for ray casting, once per tank."""
+        return Occluders.of(self.scene_triangles())
 
     def scene_triangles(self, include_floor: bool = True, include_ladder: bool = True) -> np.ndarray:
         """Every surface a camera in the water can see, as triangles ``(T, 3, 3)``.

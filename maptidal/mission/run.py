@@ -538,7 +538,7 @@ class Mission:
             return
         start = time.perf_counter()
         agent = self.auction.agents[robot.index]
-        existing = np.array([np.r_[t.position, t.direction] for t in agent.tasks]).reshape(-1, 6)
+        existing = np.array([np.concatenate((t.position, t.direction)) for t in agent.tasks]).reshape(-1, 6)
         mesh = keyframe.keyframe.mesh
         try:
             new = discover(mesh.vertices, mesh.faces, existing=existing, params=self.params.discovery).final
