@@ -19,6 +19,7 @@ DVL has no bottom lock, the estimator integrates it through the vehicle's motion
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -114,10 +115,16 @@ class MotionModel:
         velocity, so the step is stable at any ``dt``."""
         v = np.asarray(velocity_body, float)
         force = np.asarray(force_body, float) + self.net_buoyancy_n * np.asarray(up_body, float)
-        mass = np.asarray(self.inertia, float)
-        damping = np.asarray(self.linear_damping, float)
-        damping = damping + np.asarray(self.quadratic_damping, float) * np.abs(v)
-        return (mass * v + dt * force) / (mass + dt * damping)
+        mass, linear, quadratic = self._arrays
+        return (mass * v + dt * force) / (mass + dt * (linear + quadratic * np.abs(v)))
+
+    @functools.cached_property
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        # the coefficients as arrays once: step runs every control period
+        return tuple(
+            np.asarray(values, float)
+            for values in (self.inertia, self.linear_damping, self.quadratic_damping)
+        )
 
 
 class DeadReckoning:

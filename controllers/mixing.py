@@ -69,14 +69,13 @@ class MixerParams:
             raise ValueError(f"unknown ArduSub frame {self.frame!r}; choose one of {sorted(FRAMES)}")
 
 
-# the factors' columns (roll, pitch, yaw, throttle, forward, lateral) taken in pilot-command order (surge,
-# sway, heave, roll, pitch, yaw), so that a motor's mix is one dot product with the command
-_FACTOR_COLUMN_OF_PILOT_AXIS = [4, 5, 3, 0, 1, 2]
-_PILOT_FACTORS = {name: factors[:, _FACTOR_COLUMN_OF_PILOT_AXIS] for name, factors in FRAMES.items()}
+# the Heavy's factor columns (roll, pitch, yaw, throttle, forward, lateral) taken in pilot-command order
+# (surge, sway, heave, roll, pitch, yaw), so that a motor's mix is one dot product with the command
+_6DOF_BY_PILOT_AXIS = VECTORED_6DOF_FACTORS[:, [4, 5, 3, 0, 1, 2]]
 # vectored_6dof mixes two groups apart: roll, pitch and throttle (pilot axes 3, 4, 2); yaw, forward and
 # lateral (5, 0, 1)
-_ROLL_PITCH_THROTTLE = _PILOT_FACTORS["vectored_6dof"] * np.array([0, 0, 1, 1, 1, 0], float)
-_YAW_FORWARD_LATERAL = _PILOT_FACTORS["vectored_6dof"] * np.array([1, 1, 0, 0, 0, 1], float)
+_ROLL_PITCH_THROTTLE = _6DOF_BY_PILOT_AXIS * np.array([0, 0, 1, 1, 1, 0], float)
+_YAW_FORWARD_LATERAL = _6DOF_BY_PILOT_AXIS * np.array([1, 1, 0, 0, 0, 1], float)
 
 
 def mix(command, params: MixerParams | None = None) -> np.ndarray:

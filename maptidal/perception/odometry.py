@@ -52,6 +52,7 @@ class OdometryParams:
     # lag and the model's error, about 20 % of a 0.25 m/s speed (5 cm); the gate is some 2.5 times that
     max_disagreement_m: float = 0.12
 
+    @property
     def horizontal_weight(self) -> float:
         """The visual weight of the horizontal translation increment (module docstring)."""
         if self.has_dvl:
@@ -132,7 +133,7 @@ class VisualOdometry:
                 motion = None  # the gate: too far from where the dead reckoning says the camera went
                 self.gated += 1
         if motion is not None:
-            horizontal = self.params.horizontal_weight()
+            horizontal = self.params.horizontal_weight
             w = np.array([horizontal, horizontal, self.params.visual_weight_depth])
             step = w * visual_step + (1.0 - w) * dr_step
             self.visual_updates += 1
