@@ -127,6 +127,8 @@ def test_a_killed_mission_leaves_a_log_the_report_rebuilds(tmp_path):
         ("[mission]\nduration_s = -3\n", "duration"),
         ("[mission]\nclearance_m = -1\n", "clearance_m"),
         ('[mission]\nclearance_m = "far"\n', "clearance_m"),
+        ("[mission]\nrender_samples = -1\n", "render_samples"),
+        ("[mission]\nrender_samples = 2.5\n", "render_samples"),
         ("[mission]\ncommand_rate_hz = 0\n", "command_rate_hz"),
         ('[[mission.events]]\ntime_s = 5\nkind = "fail"\nrobot = "rov7"\n', "rov7"),
         ("[mission]\nspeed = 3\n", "[mission] takes only"),

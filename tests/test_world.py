@@ -346,3 +346,25 @@ def test_rendered_window_has_the_oak_d_focal_length_and_square_pixels():
         assert height == pytest.approx(focal_px * window.height / (distance + 0.01), abs=2.5), side
         assert width / height == pytest.approx(window.width / window.height, rel=0.02)
     assert sim.intrinsics()["K"][0][0] == pytest.approx(focal_px) == sim.intrinsics()["K"][1][1]
+
+
+def test_render_samples_sets_the_anti_aliasing_and_keeps_the_geometry():
+    distance = 0.8
+    vehicle = load_vehicle("heavy")
+    spec = RobotSpec("rov", vehicle, (-distance - vehicle.sensors.camera_position[0], 0.0, 1.0))
+    scenario = Scenario("wall", PLAIN_WALL, (spec,), water=WaterParams(enabled=False), noise=QUIET)
+    images = {}
+    for samples in (0, 4):
+        sim = Simulation(scenario, render_samples=samples)
+        assert sim.model.vis.quality.offsamples == samples
+        images[samples] = sim.render_stereo("rov", water=False)
+        rendering.release(sim.model)
+        sim.close()
+    gray = [cv2.cvtColor(image, cv2.COLOR_RGB2GRAY).astype(np.float32) for image in images[0]]
+    (shift_x, _), _ = cv2.phaseCorrelate(gray[1], gray[0])
+    assert abs(shift_x - sim.camera.fx * sim.camera.baseline_m / distance) < 1.0  # same geometry
+    # multisampling blends the pixels an edge crosses (the wall's far corners and the floor line)
+    assert not np.array_equal(images[0][0], images[4][0])
+    for bad in (-1, 2.0, True, 17):
+        with pytest.raises(ValueError, match="render_samples"):
+            Simulation(scenario, render_samples=bad)

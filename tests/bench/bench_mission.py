@@ -27,7 +27,12 @@ from maptidal.mission.run import Mission
 def floor_factor(scenario, params, duration_s: float) -> float:
     """Real-time factor of bare stepping and rendering (the mission's floor)."""
     width, height = params.image_size
-    sim = Simulation(scenario, camera=StereoCameraParams(width=width, height=height), flight_mode="stabilize")
+    sim = Simulation(
+        scenario,
+        camera=StereoCameraParams(width=width, height=height),
+        flight_mode="stabilize",
+        render_samples=params.render_samples,
+    )
     sim.reset(seed=params.seed)
     names = [r.name for r in scenario.robots]
     commands = {name: np.zeros(6) for name in names}
@@ -58,8 +63,16 @@ def main() -> None:
         help="make every stereo frame a keyframe (1 Hz per robot) rather than the mission's motion "
         "thresholds (a keyframe per 25 cm or 20 deg, at least every 2 s)",
     )
+    parser.add_argument(
+        "--render-samples",
+        type=int,
+        default=None,
+        help="the images' anti-aliasing samples, for the mission and its floor (default: the mission's, 4)",
+    )
     args = parser.parse_args()
     scenario, params = prepare_mission(None, duration_s=args.duration, seed=args.seed)
+    if args.render_samples is not None:
+        params = dataclasses.replace(params, render_samples=args.render_samples)
     if args.keyframe_every_frame:
         every = 1.0 / params.frame_rate_hz
         keyframes = dataclasses.replace(params.keyframes, min_interval_s=every, max_interval_s=every)
