@@ -430,12 +430,15 @@ class CBBAAgent:
         self.stats.messages_accepted += 1
         if message.position is not None:
             self.peer_positions[sender] = (np.asarray(message.position, float), now_s)
-        if message.has_content:
-            self._ack_owed[sender] = message.seq
         self._peer_task_array(sender)
         self._apply_acks(sender, message.acks)
         if message.tasks:
             self.add_tasks(message.tasks, from_robot=sender)
+        # an ack tells the sender that every entry landed; an entry on a task this robot has no record of
+        # is dropped, so the message goes unacknowledged and the sender repeats the entry (a robot that
+        # joined after a task was done had otherwise been counted as knowing it done, and flew to it)
+        if message.has_content and not (len(message.keys) and (self.slots_of(message.keys) < 0).any()):
+            self._ack_owed[sender] = message.seq
         clocks_sender = np.full(MAX_ROBOTS, NEVER, dtype=np.int64)
         clocks_sender[: len(message.clocks_ms)] = message.clocks_ms
         # a robot heard of more recently than when this robot gave up on it is alive after all
