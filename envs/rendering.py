@@ -67,6 +67,15 @@ _water_passes: dict[int, GLWaterPass | None] = {}
 _cleanup_registered = False
 
 
+def check_render_samples(samples: object) -> int:
+    """``samples`` as a multisample anti-aliasing count (MuJoCo's ``visual/quality/offsamples``), or
+    ValueError unless it is a whole number from 0 (off) to 16."""
+    whole = isinstance(samples, int) and not isinstance(samples, bool)
+    if not (whole and 0 <= samples <= 16):
+        raise ValueError(f"render_samples must be a whole number from 0 to 16, got {samples!r}")
+    return samples
+
+
 def shared_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
     """The process's renderer for ``model`` at ``height x width`` (created once, then reused)."""
     key = id(model)

@@ -44,6 +44,7 @@ from controllers.thrusters import linearise_thrusters
 from envs import hydrodynamics
 from envs.gl_water import CameraGeometry
 from envs.rendering import (
+    check_render_samples,
     depth_coefficients,
     gl_water_available,
     release,
@@ -98,9 +99,7 @@ class Simulation:
         mode_params: ModeParams | None = None,
         render_samples: int = 4,
     ) -> None:
-        whole = isinstance(render_samples, int) and not isinstance(render_samples, bool)
-        if not (whole and 0 <= render_samples <= 16):
-            raise ValueError(f"render_samples must be a whole number from 0 to 16, got {render_samples!r}")
+        check_render_samples(render_samples)
         self.mode_params = mode_params or ModeParams()
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         self.camera = camera or StereoCameraParams()

@@ -29,18 +29,21 @@ PLAIN_WALL = TankModel(
 )
 
 
-def facing_wall(distance_m: float, water: WaterParams, backend: str = "auto", **robot) -> Simulation:
+def facing_wall(
+    distance_m: float, water: WaterParams, backend: str = "auto", render_samples: int = 4, **robot
+) -> Simulation:
     """A Heavy whose cameras are ``distance_m`` from a plain end wall, looking at it; ``backend`` is
     where the water model runs (a "gl" that cannot run here skips the test)."""
     vehicle = load_vehicle("heavy")
     x = -distance_m - vehicle.sensors.camera_position[0]
     spec = RobotSpec("rov", vehicle, (x, 0.0, 1.0), **robot)
-    return with_backend(Scenario("wall", PLAIN_WALL, (spec,), water=water, noise=QUIET), backend)
+    scenario = Scenario("wall", PLAIN_WALL, (spec,), water=water, noise=QUIET)
+    return with_backend(scenario, backend, render_samples=render_samples)
 
 
-def with_backend(scenario: Scenario, backend: str) -> Simulation:
+def with_backend(scenario: Scenario, backend: str, **options) -> Simulation:
     """A Simulation of ``scenario`` whose water model runs on ``backend``; skips where GL cannot."""
-    sim = Simulation(scenario, water_backend=backend)
+    sim = Simulation(scenario, water_backend=backend, **options)
     if backend == "gl":
         try:
             assert sim.water_backend == "gl"
@@ -350,12 +353,9 @@ def test_rendered_window_has_the_oak_d_focal_length_and_square_pixels():
 
 def test_render_samples_sets_the_anti_aliasing_and_keeps_the_geometry():
     distance = 0.8
-    vehicle = load_vehicle("heavy")
-    spec = RobotSpec("rov", vehicle, (-distance - vehicle.sensors.camera_position[0], 0.0, 1.0))
-    scenario = Scenario("wall", PLAIN_WALL, (spec,), water=WaterParams(enabled=False), noise=QUIET)
     images = {}
     for samples in (0, 4):
-        sim = Simulation(scenario, render_samples=samples)
+        sim = facing_wall(distance, WaterParams(enabled=False), render_samples=samples)
         assert sim.model.vis.quality.offsamples == samples
         images[samples] = sim.render_stereo("rov", water=False)
         rendering.release(sim.model)
@@ -367,4 +367,4 @@ def test_render_samples_sets_the_anti_aliasing_and_keeps_the_geometry():
     assert not np.array_equal(images[0][0], images[4][0])
     for bad in (-1, 2.0, True, 17):
         with pytest.raises(ValueError, match="render_samples"):
-            Simulation(scenario, render_samples=bad)
+            facing_wall(distance, WaterParams(enabled=False), render_samples=bad)

@@ -36,6 +36,7 @@ import numpy as np
 from controllers.estimation import rotation_from_rpy
 from controllers.pose import PoseController
 from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, Route
+from envs.rendering import check_render_samples
 from envs.scenario import Scenario, inside_tank, load_scenario
 from envs.simulation import Simulation
 from envs.world import camera_offsets
@@ -167,8 +168,7 @@ class MissionParams:
             )
         if not (math.isfinite(self.clearance_m) and self.clearance_m >= 0):
             raise ValueError(f"clearance_m must be finite and >= 0, got {self.clearance_m!r}")
-        if not (isinstance(self.render_samples, int) and 0 <= self.render_samples <= 16):
-            raise ValueError(f"render_samples must be a whole number from 0 to 16, got {self.render_samples}")
+        check_render_samples(self.render_samples)
         if self.video and not (
             min(self.video_size) >= 16 and self.video_frames_per_sim_s > 0 and self.video_playback_fps > 0
         ):
