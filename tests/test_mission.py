@@ -81,13 +81,38 @@ def test_every_output_exists_and_parses(short_mission):
         assert (out / name).stat().st_size > 0, name
 
 
-def test_the_same_seed_gives_the_same_mission(short_mission, tmp_path):
+def test_a_frames_tasks_enter_the_auction_at_the_robots_next_frame(short_mission):
+    # the one-frame latency of perception (maptidal.mission.perception): a keyframe's tasks are minted one
+    # frame period after the frame was taken, within the control period the frame clock falls in
+    mission, document, out = short_mission
+    period = mission.scenario.control_period_s
+    events = read_events(out)
+    keyframes = [e for e in events if e["kind"] == "keyframe"]
+    assert keyframes
+    for event in keyframes:
+        robot = mission.robots[event["robot"]]
+        assert abs(event["t"] - event["frame_s"] - robot.frame_every_s) <= period + 1e-6, event
+    found = {t["id"]: t["found_at_s"] for t in document["tasks"]}
+    for event in (e for e in events if e["kind"] == "discovered"):
+        assert found[event["task"]] == event["t"] and event["frame_s"] < event["t"]
+
+
+def test_the_same_seed_gives_the_same_mission_with_perception_apart_or_inline(short_mission, tmp_path):
+    # the fixture's perception ran in its worker process; this one runs it in the mission's own process.
+    # A frame's answer is taken one frame later either way, so the two missions are the same event for
+    # event, not merely alike
     scenario, _ = load_mission(None)
-    _, first, _ = short_mission
-    again = Mission(scenario, MissionParams(duration_s=45.0, seed=3), tmp_path).run()
-    strip = lambda doc: [(t["id"], t["position"], t["completed"], t["completion_time"]) for t in doc["tasks"]]  # noqa: E731
-    assert strip(again) == strip(first)
+    _, first, first_out = short_mission
+    assert first["perception_worker"]["mode"] == "process"
+    again = Mission(
+        scenario, MissionParams(duration_s=45.0, seed=3, perception_process=False), tmp_path
+    ).run()
+    assert again["perception_worker"] == {"mode": "inline", "wait_s": 0.0}
+    assert again["tasks"] == first["tasks"]
     assert again["comms"] == first["comms"]
+    assert again["inspected_pct"] == first["inspected_pct"]
+    without_start = lambda out: [e for e in read_events(out) if e["kind"] != "start"]  # noqa: E731
+    assert without_start(tmp_path) == without_start(first_out)
 
 
 def test_a_killed_mission_leaves_a_log_the_report_rebuilds(tmp_path):
@@ -109,6 +134,14 @@ def test_a_killed_mission_leaves_a_log_the_report_rebuilds(tmp_path):
     finally:
         process.wait(timeout=30)
     assert process.returncode == -signal.SIGKILL
+    # the perception worker sees its pipe close and exits: the kill leaves no process behind
+    (start,) = [e for e in read_events(tmp_path) if e["kind"] == "start"]
+    assert start["perception"]["mode"] == "process"
+    worker = start["perception"]["pid"]
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline and _alive(worker):
+        time.sleep(0.2)
+    assert not _alive(worker), f"the perception worker {worker} outlived the killed mission"
     done = run_maptidal("report", tmp_path)
     assert done.returncode == 0, done.stderr
     rebuilt = json.loads((tmp_path / "mission.json").read_text())
@@ -120,6 +153,15 @@ def test_a_killed_mission_leaves_a_log_the_report_rebuilds(tmp_path):
     assert (tmp_path / "report.md").is_file() and (tmp_path / "top_view.png").is_file()
 
 
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` is a live process (a zombie, dead but not yet reaped by init, counts as gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
 @pytest.mark.parametrize(
     ("mission_table", "message"),
     [
@@ -129,6 +171,7 @@ def test_a_killed_mission_leaves_a_log_the_report_rebuilds(tmp_path):
         ('[mission]\nclearance_m = "far"\n', "clearance_m"),
         ("[mission]\nrender_samples = -1\n", "render_samples"),
         ("[mission]\nrender_samples = 2.5\n", "render_samples"),
+        ("[mission]\nperception_process = 1\n", "perception_process"),
         ("[mission]\ncommand_rate_hz = 0\n", "command_rate_hz"),
         ('[[mission.events]]\ntime_s = 5\nkind = "fail"\nrobot = "rov7"\n', "rov7"),
         ("[mission]\nspeed = 3\n", "[mission] takes only"),

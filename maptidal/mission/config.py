@@ -7,6 +7,7 @@
     command_rate_hz = 10.0 # go-to-pose's pilot commands per second
     clearance_m = 1.0      # how far a robot keeps from lower-indexed teammates (0: not at all)
     render_samples = 4     # the images' anti-aliasing samples (0: off, about twice as fast on a CPU)
+    perception_process = true  # perception and discovery in a worker process (false: inline, slower)
     [[mission.events]]
     time_s = 60
     kind = "fail"          # rov1 stops and falls silent
@@ -45,6 +46,7 @@ MISSION_KEYS = {
     "command_rate_hz",
     "clearance_m",
     "render_samples",
+    "perception_process",
 }
 EVENT_KEYS = {"time_s", "kind", "robot", "current", "duration_s", "robots"}
 
@@ -61,6 +63,10 @@ def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
         raise ValueError(f"{path}: [mission] takes only {', '.join(sorted(MISSION_KEYS))}")
     settings = {key: value for key, value in table.items() if key != "events"}
     for key, value in settings.items():
+        if key == "perception_process":
+            if not isinstance(value, bool):
+                raise ValueError(f"{path}: [mission] {key} must be true or false, got {value!r}")
+            continue
         wanted = str if key == "pose_source" else int if key == "render_samples" else (int, float)
         if not isinstance(value, wanted) or isinstance(value, bool):
             kind = "a string" if wanted is str else "a whole number" if wanted is int else "a number"

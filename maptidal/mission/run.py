@@ -9,7 +9,10 @@ when no visual fix has come for ``lost_after_s`` it holds depth and heading rath
 cannot tell it has reached. Every ``1 / frame_rate_hz`` seconds each
 robot renders its stereo pair and its front end (:mod:`maptidal.perception.frontend`) tracks, fuses and,
 at a keyframe, meshes; discovery (:func:`maptidal.discovery.discover`) runs on the mesh with every task
-the robot knows as existing tasks, and each new task it can reach is minted into its CBBA agent. The
+the robot knows as existing tasks, and each new task it can reach is minted into its CBBA agent. That
+work runs in a process of its own beside the loop (:mod:`maptidal.mission.perception`), and the mission
+takes a frame's answer (the visual fix and the new tasks) at the robot's next frame: a one-frame latency,
+the same whether the worker runs apart or inline, so the mission does not depend on which. The
 agents (:class:`maptidal.allocation.auction.AuctionSimulation`) exchange only their binary messages over
 the acoustic channel, in TDMA slots, in step with the physics. A robot explores first (a yaw sweep where
 it starts), then flies the first task on its CBBA path, holds it for ``dwell_s`` within the controller's
@@ -47,10 +50,11 @@ from maptidal.allocation.scoring import AuctionParams, RobotProfile
 from maptidal.camera import StereoCameraParams
 from maptidal.comms.channel import ChannelParams, Outage
 from maptidal.coverage import CoverageModel, CoverageParams, SeenVoxels
-from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
+from maptidal.discovery import DiscoveryParams
 from maptidal.free_space import free_space_mask
 from maptidal.mission.capture import camera_pose_from_body
 from maptidal.mission.outputs import MissionWriter
+from maptidal.mission.perception import FrameJob, FrameResult, start_perception
 from maptidal.mission.video import MissionVideo
 from maptidal.perception.frontend import POSE_SOURCES, FrontEnd, FrontEndParams
 from maptidal.perception.keyframing import KeyframeParams
@@ -121,6 +125,9 @@ class MissionParams:
     # the images' multisample anti-aliasing (Simulation's render_samples): 4, MuJoCo's default, stands
     # for the lens's blur; 0 halves the render time on Mesa's CPU rasteriser (README, "Closed-loop mission")
     render_samples: int = 4
+    # the robots' perception and discovery in a worker process on a second core (False: in the mission's
+    # own process, about 1.4 times slower on 2 cores, with the same results; maptidal.mission.perception)
+    perception_process: bool = True
     pose_source: str = "vo"
     explore_yaw_deg: float = 60.0
     yaw_rate_deg_s: float = 12.0
@@ -181,7 +188,6 @@ class _Robot:
 
     name: str
     index: int
-    front: FrontEnd
     controller: PoseController
     left_offset: np.ndarray
     centre: np.ndarray
@@ -204,6 +210,7 @@ class _Robot:
     yielding: bool = False  # holding its reference out of a teammate's clearance
     launch: tuple[np.ndarray, float] | None = None  # a joining robot's parking pose (position, yaw)
     last_left: np.ndarray | None = None  # the latest left image, for the video's inset
+    visual_updates: int = 0  # the front end's visual fixes, as of the latest frame result taken
 
     @property
     def active(self) -> bool:
@@ -248,6 +255,10 @@ class Mission:
             if e.kind == "outage"
         )
         width, height = params.image_size
+        # the perception worker first, so that its start overlaps the simulator's
+        self.perception = start_perception(
+            names, (height, width, 3), in_process=not params.perception_process
+        )
         self.sim = Simulation(
             self.scenario,
             camera=StereoCameraParams(width=width, height=height),
@@ -268,6 +279,7 @@ class Mission:
         self.robots: dict[str, _Robot] = {}
         self.robots_by_index: dict[int, _Robot] = {}
         profiles, joining = [], []
+        fronts: dict[str, FrontEnd] = {}  # each robot's front end, handed to the perception worker
         for index, spec in enumerate(self.scenario.robots):
             truth = self.sim.ground_truth(spec.name)
             profile = RobotProfile(spec.name, index, np.asarray(truth["position"]), speed=params.speed_m_s)
@@ -275,16 +287,16 @@ class Mission:
                 joining.append(AuctionEvent(joins[spec.name], "join", profile=profile))
             else:
                 profiles.append(profile)
+            fronts[spec.name] = FrontEnd(
+                self.intrinsics,
+                params.pose_source,
+                FrontEndParams(
+                    keyframes=params.keyframes, odometry=OdometryParams(has_dvl="dvl" in spec.sensors)
+                ),
+            )
             self.robots[spec.name] = _Robot(
                 spec.name,
                 index,
-                FrontEnd(
-                    self.intrinsics,
-                    params.pose_source,
-                    FrontEndParams(
-                        keyframes=params.keyframes, odometry=OdometryParams(has_dvl="dvl" in spec.sensors)
-                    ),
-                ),
                 PoseController(spec.vehicle.controller_model(), hold_roll_pitch=False),
                 camera_offsets(spec.vehicle, self.sim.camera)["left"],
                 np.asarray(spec.vehicle.sensors.camera_position, float),
@@ -300,6 +312,8 @@ class Mission:
         channel = dataclasses.replace(params.channel, outages=params.channel.outages + outages)
         self.auction = AuctionSimulation(profiles, [], channel, AuctionParams(), params.agent, events=joining)
         self.writer = MissionWriter(out_dir)
+        self.perception.configure(fronts, params.discovery)
+        self.sim.water_backend  # noqa: B018 - makes the renderer now, not in the first frame's time
         self.tasks: dict[int, dict] = {}  # key -> record (the mission's own ledger, for the outputs)
         self.timing = dict.fromkeys(
             ("physics", "rendering", "perception", "discovery", "allocation", "control"), 0.0
@@ -380,7 +394,7 @@ class Mission:
         """A robot without a DVL whose visual odometry has not fixed its position for ``lost_after_s``."""
         if robot.has_dvl or self.params.pose_source != "vo":
             return False
-        updates = robot.front.odometry.visual_updates
+        updates = robot.visual_updates
         if updates != robot.fixes_seen:
             robot.fixes_seen, robot.last_fix_s = updates, now
         lost = now - robot.last_fix_s > self.params.lost_after_s
@@ -421,6 +435,12 @@ class Mission:
     def run(self, progress: Callable[[float, int, int, float, float], None] | None = None) -> dict:
         """Fly the mission; returns the final ``mission.json`` document. ``progress(now_s, found, done,
         duration_s, inspected_pct)`` is called once a simulated second."""
+        try:
+            return self._run(progress)
+        finally:
+            self.perception.close()  # the worker process goes, whatever ended the mission
+
+    def _run(self, progress: Callable[[float, int, int, float, float], None] | None) -> dict:
         p = self.params
         period = self.scenario.control_period_s
         # the go-to-pose controller's rate: a whole number of control periods
@@ -434,7 +454,14 @@ class Mission:
             if robot.active:
                 self._start_exploring(robot, 0.0)
         waiting = [r.name for r in self.robots.values() if not r.active]
-        self.writer.event(0.0, "start", robots=list(self.robots), pose_source=p.pose_source, waiting=waiting)
+        self.writer.event(
+            0.0,
+            "start",
+            robots=list(self.robots),
+            pose_source=p.pose_source,
+            waiting=waiting,
+            perception={"mode": self.perception.mode, "pid": self.perception.pid},
+        )
         now = 0.0
         finished = False
         while now < p.duration_s - 1e-9:
@@ -530,28 +557,42 @@ class Mission:
             self.writer.event(now, "current", current=list(event.current))
 
     def _see(self, robot: _Robot, now: float) -> None:
+        """Render the robot's stereo pair, take its previous frame's answer from perception, and send it
+        this frame with the tasks it knows now."""
         start = time.perf_counter()
         left, right = self.sim.render_stereo(robot.name)
         robot.last_left = left
         self.timing["rendering"] += time.perf_counter() - start
-        start = time.perf_counter()
+        if self.perception.pending(robot.name):
+            self._use_frame_result(robot, self.perception.result(robot.name), now)
         base = "truth" if self.params.pose_source == "truth" else "dr"
-        record, keyframe = robot.front.process(0, now, left, right, self._camera_pose(robot, base))
-        if self.params.pose_source == "vo":
+        known = self.auction.agents[robot.index].tasks
+        existing = np.array([np.concatenate((t.position, t.direction)) for t in known]).reshape(-1, 6)
+        job = FrameJob(
+            robot.name,
+            now,
+            left,
+            right,
+            self._camera_pose(robot, base),
+            self._camera_pose(robot, "dr"),
+            existing,
+        )
+        self.perception.submit(job)
+
+    def _use_frame_result(self, robot: _Robot, result: FrameResult, now: float) -> None:
+        """A frame's answer, one frame period after it was taken: the visual fix to fly on, and the new
+        tasks the robot can reach, minted into its CBBA agent."""
+        self.timing["perception"] += result.perception_s
+        self.timing["discovery"] += result.discovery_s
+        if result.xy_correction is not None:
             # the visual pose of the camera, back to the body: the horizontal offset to fly on
-            dr = self._camera_pose(robot, "dr")
-            robot.xy_correction = (record.pose.position - dr.position)[:2]
-        self.timing["perception"] += time.perf_counter() - start
-        if keyframe is None or len(keyframe.keyframe.mesh.faces) == 0:
+            robot.xy_correction = result.xy_correction
+        robot.visual_updates = result.visual_updates
+        if result.faces == 0:
             return
         start = time.perf_counter()
         agent = self.auction.agents[robot.index]
-        existing = np.array([np.concatenate((t.position, t.direction)) for t in agent.tasks]).reshape(-1, 6)
-        mesh = keyframe.keyframe.mesh
-        try:
-            new = discover(mesh.vertices, mesh.faces, existing=existing, params=self.params.discovery).final
-        except DiscoveryInputError:
-            new = np.zeros((0, 6))
+        new = result.new_tasks
         reachable = self._reachable(new)
         for row, ok in zip(new, reachable, strict=True):
             if not ok:
@@ -575,16 +616,18 @@ class Mission:
                 task=task.key,
                 position=task.position.tolist(),
                 direction=task.direction.tolist(),
+                frame_s=round(result.time_s, 3),
             )
         self.writer.event(
             now,
             "keyframe",
             robot=robot.name,
-            faces=len(mesh.faces),
+            faces=result.faces,
             new_tasks=len(new),
             reachable=int(reachable.sum()),
+            frame_s=round(result.time_s, 3),
         )
-        self.timing["discovery"] += time.perf_counter() - start
+        self.timing["allocation"] += time.perf_counter() - start
 
     def _advance_activity(self, robot: _Robot, now: float) -> None:
         agent = self.auction.agents[robot.index]
@@ -696,5 +739,8 @@ class Mission:
             # captures of a task already captured (by this robot or another): what a conflict costs
             "duplicate_inspections": sum(n - 1 for n in self.inspections.values()),
             "tasks": sorted(self.tasks.values(), key=lambda t: t["id"]),
+            # perception and discovery's timing is the worker's; in a process of its own it runs beside the
+            # rest, and wait_s is how long the loop waited for it
             "timing": dict(self.timing),
+            "perception_worker": {"mode": self.perception.mode, "wait_s": self.perception.wait_s},
         }

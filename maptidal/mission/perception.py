@@ -1,0 +1,264 @@
+"""The robots' perception and discovery, run beside the mission's loop (issue [mission]).
+
+Each robot's stereo frame goes to its front end (:class:`maptidal.perception.frontend.FrontEnd`), and at a
+keyframe its mesh goes to discovery (:func:`maptidal.discovery.discover`) with the tasks the robot knew
+when the frame was taken. The mission takes the answer for a frame at that robot's next frame, one frame
+period later, as a robot's companion computer delivers its map with a latency while the vehicle flies on.
+That fixed latency is what lets the work run in a process of its own on a second core
+(:class:`PerceptionProcess`) and give the same mission, number for number, as running it in the mission's
+own process (:class:`InlinePerception`): the answer depends only on the frame, never on when the worker
+finished.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import multiprocessing
+import queue
+import threading
+import time
+import traceback
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
+from maptidal.perception.frontend import FrontEnd
+from maptidal.perception.recording import CameraPose
+
+
+@dataclass(frozen=True)
+class FrameJob:
+    """One robot's stereo frame and what its perception needs with it.
+
+    ``pose`` is the pose source's camera pose (for ``vo``, the dead-reckoned pose it corrects) and
+    ``dead_reckoned`` the dead-reckoned camera pose, from which the visual fix's horizontal offset is
+    taken; ``existing`` holds the tasks ``(N, 6)`` the robot knew at ``time_s``."""
+
+    robot: str
+    time_s: float
+    left: np.ndarray
+    right: np.ndarray
+    pose: CameraPose
+    dead_reckoned: CameraPose
+    existing: np.ndarray
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """What a frame gave: the horizontal offset ``xy_correction`` of the visual pose from the dead
+    reckoning (None unless the pose source is ``vo``), the front end's count of visual fixes so far, the
+    keyframe mesh's face count (0 when the frame made no keyframe, or an empty mesh), the new tasks ``(M,
+    6)`` discovery found on it, and the seconds spent in the front end and in discovery."""
+
+    robot: str
+    time_s: float
+    xy_correction: np.ndarray | None
+    visual_updates: int
+    faces: int
+    new_tasks: np.ndarray
+    perception_s: float
+    discovery_s: float
+
+
+def perceive(front: FrontEnd, job: FrameJob, discovery: DiscoveryParams) -> FrameResult:
+    """Run ``front`` on ``job``'s frame and, at a keyframe, discovery on its mesh."""
+    start = time.perf_counter()
+    record, keyframe = front.process(0, job.time_s, job.left, job.right, job.pose)
+    correction = None
+    if front.pose_source == "vo":
+        correction = (record.pose.position - job.dead_reckoned.position)[:2]
+    perception_s = time.perf_counter() - start
+    faces, new = 0, np.zeros((0, 6))
+    if keyframe is not None and len(keyframe.keyframe.mesh.faces):
+        start = time.perf_counter()
+        mesh = keyframe.keyframe.mesh
+        faces = len(mesh.faces)
+        try:
+            new = discover(mesh.vertices, mesh.faces, existing=job.existing, params=discovery).final
+        except DiscoveryInputError:
+            new = np.zeros((0, 6))  # a degenerate keyframe mesh finds nothing; the mission goes on
+        discovery_s = time.perf_counter() - start
+    else:
+        discovery_s = 0.0
+    return FrameResult(
+        job.robot,
+        job.time_s,
+        correction,
+        front.odometry.visual_updates,
+        faces,
+        new,
+        perception_s,
+        discovery_s,
+    )
+
+
+class InlinePerception:
+    """Perception in the mission's own process: each job is done when it is submitted."""
+
+    mode = "inline"
+    pid = None  # no process of its own
+
+    def __init__(self) -> None:
+        self.fronts: dict[str, FrontEnd] = {}
+        self.discovery = DiscoveryParams()
+        self._results: dict[str, FrameResult] = {}
+        self.wait_s = 0.0  # nothing to wait for: the work is done at submit
+
+    def configure(self, fronts: dict[str, FrontEnd], discovery: DiscoveryParams) -> None:
+        """The robots' front ends and the discovery parameters, before the first job."""
+        self.fronts, self.discovery = fronts, discovery
+
+    def submit(self, job: FrameJob) -> None:
+        """Process ``job`` now; its result waits for :meth:`result`."""
+        if job.robot in self._results:
+            raise RuntimeError(f"{job.robot} already has a frame in perception")
+        self._results[job.robot] = perceive(self.fronts[job.robot], job, self.discovery)
+
+    def pending(self, robot: str) -> bool:
+        """Whether ``robot`` has a frame whose result has not been taken."""
+        return robot in self._results
+
+    def result(self, robot: str) -> FrameResult:
+        """The result of ``robot``'s frame in perception."""
+        return self._results.pop(robot)
+
+    def close(self) -> None:
+        """Drop any result not taken."""
+        self._results.clear()
+
+
+def _image_views(blocks: dict, shape: tuple[int, int, int]) -> dict[str, np.ndarray]:
+    """Each robot's shared block as a ``(2, H, W, 3)`` uint8 array: its left and right images."""
+    return {name: np.frombuffer(block, np.uint8).reshape(2, *shape) for name, block in blocks.items()}
+
+
+def _serve(connection, blocks: dict, shape: tuple) -> None:
+    """The worker process: take the front ends and discovery parameters, then run jobs in the order they
+    come and send back each result (or the error). A job's images are in its robot's shared block, which
+    the mission leaves alone until the result is back."""
+    # one OpenCV thread: the second core is this process's, the first the mission's and its renderer's
+    cv2.setNumThreads(1)
+    images = _image_views(blocks, shape)
+    jobs: queue.Queue = queue.Queue()
+
+    def receive() -> None:
+        # a thread that always reads, so the mission's send of a frame never waits for a busy worker
+        while True:
+            try:
+                jobs.put(connection.recv())
+            except (EOFError, OSError):  # the mission closed the link, or died
+                jobs.put(None)
+                return
+
+    threading.Thread(target=receive, daemon=True).start()
+    setup = jobs.get()
+    if setup is None:
+        return
+    fronts, discovery = setup
+    while (job := jobs.get()) is not None:
+        pair = images[job.robot]
+        job = dataclasses.replace(job, left=pair[0].copy(), right=pair[1].copy())
+        try:
+            answer = perceive(fronts[job.robot], job, discovery)
+        except Exception:  # sent back whole, raised in the mission
+            answer = RuntimeError(
+                f"perception of {job.robot}'s frame at {job.time_s:.2f} s failed:\n" + traceback.format_exc()
+            )
+        try:
+            connection.send(answer)
+        except (BrokenPipeError, OSError):
+            return
+
+
+class PerceptionProcess:
+    """Perception in a worker process of its own (the second core), fed over a pipe, the images through a
+    shared block per robot (sent through the pipe they cost the mission several ms a frame, waiting on a
+    busy worker). Results come back in the order the jobs were sent; each robot has at most one frame in
+    flight. ``robots`` names them and ``image_shape`` is the images' ``(H, W, 3)``. The process starts at
+    once, so its imports overlap the simulator's setup; :meth:`configure` then hands it the front ends."""
+
+    mode = "process"
+
+    def __init__(self, robots: list[str], image_shape: tuple[int, int, int]) -> None:
+        context = multiprocessing.get_context("spawn")  # no fork of a process holding GL and thread pools
+        self._shape = tuple(image_shape)
+        size = 2 * int(np.prod(self._shape))
+        blocks = {name: context.RawArray("B", size) for name in robots}
+        self._images = _image_views(blocks, self._shape)
+        self._connection, child = context.Pipe()
+        self._process = context.Process(
+            target=_serve, args=(child, blocks, self._shape), name="maptidal-perception", daemon=True
+        )
+        self._process.start()
+        child.close()
+        self.pid = self._process.pid
+        self._in_flight: list[str] = []
+        self._results: dict[str, FrameResult] = {}
+        self.wait_s = 0.0  # time the mission spent waiting for the worker
+
+    def configure(self, fronts: dict[str, FrontEnd], discovery: DiscoveryParams) -> None:
+        """Send the robots' front ends (one per robot named at the start) and the discovery parameters."""
+        if set(fronts) != set(self._images):
+            raise ValueError(f"front ends for {sorted(fronts)}, but the worker serves {sorted(self._images)}")
+        self._send((fronts, discovery))
+
+    def submit(self, job: FrameJob) -> None:
+        """Send ``job`` to the worker."""
+        if job.robot in self._in_flight or job.robot in self._results:
+            raise RuntimeError(f"{job.robot} already has a frame in perception")
+        if job.left.shape != self._shape or job.right.shape != self._shape:
+            raise ValueError(f"images of {job.left.shape} and {job.right.shape}, expected {self._shape}")
+        pair = self._images[job.robot]
+        pair[0], pair[1] = job.left, job.right
+        self._send(dataclasses.replace(job, left=None, right=None))
+        self._in_flight.append(job.robot)
+
+    def pending(self, robot: str) -> bool:
+        """Whether ``robot`` has a frame whose result has not been taken."""
+        return robot in self._in_flight or robot in self._results
+
+    def result(self, robot: str) -> FrameResult:
+        """The result of ``robot``'s frame, waiting for the worker if it is not back yet."""
+        start = time.perf_counter()
+        while robot not in self._results:
+            try:
+                answer = self._connection.recv()
+            except (EOFError, OSError) as error:
+                raise self._exited() from error
+            if isinstance(answer, Exception):
+                raise answer
+            self._in_flight.remove(answer.robot)
+            self._results[answer.robot] = answer
+        self.wait_s += time.perf_counter() - start
+        return self._results.pop(robot)
+
+    def _send(self, message) -> None:
+        try:
+            self._connection.send(message)
+        except OSError as error:  # a broken pipe: the worker is gone
+            raise self._exited() from error
+
+    def _exited(self) -> RuntimeError:
+        self._process.join(timeout=1.0)
+        return RuntimeError(f"the perception worker exited (exit code {self._process.exitcode})")
+
+    def close(self) -> None:
+        """Stop the worker; results not taken are dropped."""
+        self._connection.close()
+        self._process.join(timeout=5.0)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join()
+
+
+def start_perception(
+    robots: list[str], image_shape: tuple[int, int, int], in_process: bool
+) -> InlinePerception | PerceptionProcess:
+    """A worker process for the perception of ``robots``, or the inline one when ``in_process`` is set or
+    the caller is itself a daemonic process (which may not start children, as a multiprocessing pool's
+    workers). Call ``configure`` on it before the first job."""
+    if in_process or multiprocessing.current_process().daemon:
+        return InlinePerception()
+    return PerceptionProcess(robots, image_shape)

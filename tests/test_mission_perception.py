@@ -1,0 +1,137 @@
+"""The robots' perception beside the mission's loop (maptidal.mission.perception): the worker process
+gives the answers the inline path gives, frame for frame; its errors and its death reach the mission as
+clear errors; and a robot has one frame in flight at a time."""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import cv2
+import numpy as np
+import pytest
+
+from maptidal.discovery import DiscoveryParams
+from maptidal.mission.perception import FrameJob, InlinePerception, PerceptionProcess, start_perception
+from maptidal.perception.frontend import FrontEnd, FrontEndParams
+from maptidal.perception.keyframing import KeyframeParams
+from maptidal.perception.recording import CameraIntrinsics, CameraPose
+
+WIDTH, HEIGHT = 160, 100
+INTRINSICS = CameraIntrinsics(WIDTH, HEIGHT, 120.0, 120.0, 80.0, 50.0, 0.075)
+DISPARITY_PX = 9  # a wall 1 m ahead: fx * baseline / depth
+
+
+def _wall_pair(shift_px: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A textured wall square to the camera: the right image is the left one moved by the disparity."""
+    rng = np.random.default_rng(seed)
+    wide = cv2.GaussianBlur(rng.integers(0, 256, (HEIGHT, WIDTH + 64), np.uint8), (5, 5), 1.5)
+    texture = np.repeat(wide[:, :, None], 3, axis=2)
+    left = np.ascontiguousarray(texture[:, 32 - shift_px : 32 - shift_px + WIDTH])
+    right = np.ascontiguousarray(
+        texture[:, 32 - shift_px + DISPARITY_PX : 32 - shift_px + DISPARITY_PX + WIDTH]
+    )
+    return left, right
+
+
+def _pose(x: float) -> CameraPose:
+    # optical axes: right = world -y, down = world -z, forward = world +x
+    rotation = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    return CameraPose(np.array([0.0, -x, 0.0]), rotation)
+
+
+def _fronts(names=("rov0", "rov1")) -> dict[str, FrontEnd]:
+    keyframes = KeyframeParams(min_interval_s=0.0, max_interval_s=1.0, min_translation_m=0.0)
+    return {name: FrontEnd(INTRINSICS, "vo", FrontEndParams(keyframes=keyframes)) for name in names}
+
+
+def _job(robot: str, k: int, pose: CameraPose | None = None) -> FrameJob:
+    left, right = _wall_pair(shift_px=2 * k, seed=0)
+    dead_reckoned = _pose(0.01 * k)
+    return FrameJob(robot, float(k), left, right, pose or dead_reckoned, dead_reckoned, np.zeros((0, 6)))
+
+
+def _answers(perception, frames: int = 4) -> list:
+    answers = []
+    for k in range(frames):
+        for robot in ("rov0", "rov1"):
+            if perception.pending(robot):
+                answers.append(perception.result(robot))
+            perception.submit(_job(robot, k))
+    answers += [perception.result(robot) for robot in ("rov0", "rov1")]
+    return answers
+
+
+def test_the_worker_process_gives_the_inline_answers_frame_for_frame():
+    inline = InlinePerception()
+    inline.configure(_fronts(), DiscoveryParams())
+    apart = PerceptionProcess(["rov0", "rov1"], (HEIGHT, WIDTH, 3))
+    try:
+        apart.configure(_fronts(), DiscoveryParams())
+        expected, got = _answers(inline), _answers(apart)
+    finally:
+        apart.close()
+    assert [a.robot for a in got] == [a.robot for a in expected]
+    assert any(a.faces > 0 for a in expected), "the synthetic wall made no keyframe mesh"
+    assert any(len(a.new_tasks) for a in expected), "discovery found nothing on the wall"
+    for mine, theirs in zip(got, expected, strict=True):
+        assert (mine.robot, mine.time_s, mine.faces, mine.visual_updates) == (
+            theirs.robot,
+            theirs.time_s,
+            theirs.faces,
+            theirs.visual_updates,
+        )
+        np.testing.assert_array_equal(mine.xy_correction, theirs.xy_correction)
+        np.testing.assert_array_equal(mine.new_tasks, theirs.new_tasks)
+    assert apart.wait_s > 0.0 and inline.wait_s == 0.0
+
+
+def test_an_error_in_the_worker_is_raised_in_the_mission_with_its_frame():
+    perception = PerceptionProcess(["rov0"], (HEIGHT, WIDTH, 3))
+    try:
+        perception.configure(_fronts(["rov0"]), DiscoveryParams())
+        perception.submit(_job("rov0", 0, pose=CameraPose(np.array([np.nan, 0, 0]), None)))
+        with pytest.raises(RuntimeError, match=r"perception of rov0's frame at 0.00 s failed"):
+            perception.result("rov0")
+    finally:
+        perception.close()
+
+
+def test_a_worker_that_dies_is_a_clear_error_not_a_hang():
+    perception = PerceptionProcess(["rov0"], (HEIGHT, WIDTH, 3))
+    try:
+        perception.configure(_fronts(["rov0"]), DiscoveryParams())
+        os.kill(perception.pid, signal.SIGKILL)
+        perception.submit(_job("rov0", 0))
+        with pytest.raises(RuntimeError, match="the perception worker exited"):
+            perception.result("rov0")
+    finally:
+        perception.close()
+
+
+@pytest.mark.parametrize("in_process", [True, False])
+def test_a_robot_has_one_frame_in_flight_and_images_of_the_mission_size(in_process):
+    perception = start_perception(["rov0"], (HEIGHT, WIDTH, 3), in_process=in_process)
+    try:
+        perception.configure(_fronts(["rov0"]), DiscoveryParams())
+        perception.submit(_job("rov0", 0))
+        with pytest.raises(RuntimeError, match="already has a frame"):
+            perception.submit(_job("rov0", 1))
+        perception.result("rov0")
+        if not in_process:
+            small = FrameJob(
+                "rov0", 2.0, *(np.zeros((10, 10, 3), np.uint8),) * 2, _pose(0), _pose(0), np.zeros((0, 6))
+            )
+            with pytest.raises(ValueError, match="expected"):
+                perception.submit(small)
+    finally:
+        perception.close()
+
+
+def test_the_worker_serves_only_the_robots_it_was_started_for():
+    perception = PerceptionProcess(["rov0"], (HEIGHT, WIDTH, 3))
+    try:
+        with pytest.raises(ValueError, match="serves"):
+            perception.configure(_fronts(["rov0", "rov1"]), DiscoveryParams())
+    finally:
+        perception.close()
