@@ -114,29 +114,48 @@ def _release_all() -> None:
             _close(_renderers.pop(key))
 
 
+def update_camera_scene(
+    model: mujoco.MjModel, data: mujoco.MjData, camera: str, scene: mujoco.MjvScene
+) -> mujoco.MjvScene:
+    """Fill ``scene`` with what the model camera ``camera`` sees in ``data`` now (the camera's scene
+    options). The scene is a snapshot: drawing it later, even on another thread while the physics steps
+    on, draws this moment."""
+    view = mujoco.MjvCamera()
+    view.type = mujoco.mjtCamera.mjCAMERA_FIXED
+    view.fixedcamid = model.camera(camera).id
+    mujoco.mjv_updateScene(model, data, CAMERA_SCENE_OPTION, None, view, mujoco.mjtCatBit.mjCAT_ALL, scene)
+    return scene
+
+
 def _draw(
-    model: mujoco.MjModel, data: mujoco.MjData, camera: str, height: int, width: int
+    model: mujoco.MjModel, data: mujoco.MjData | None, camera: str | mujoco.MjvScene, height: int, width: int
 ) -> mujoco.Renderer:
-    """Draw ``camera`` into the shared renderer's off-screen buffer; returns that renderer."""
+    """Draw ``camera`` (a model camera's name, seen in ``data`` now, or a scene snapshot) into the shared
+    renderer's off-screen buffer; returns that renderer."""
     renderer = shared_renderer(model, height, width)
-    renderer.update_scene(data, camera=camera, scene_option=CAMERA_SCENE_OPTION)
+    if isinstance(camera, mujoco.MjvScene):
+        scene = camera
+    else:
+        scene = update_camera_scene(model, data, camera, renderer.scene)
     ctx = renderer._mjr_context  # the Renderer's own context: reuse it rather than make another
     renderer._gl_context.make_current()
     mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, ctx)
-    mujoco.mjr_render(mujoco.MjrRect(0, 0, width, height), renderer.scene, ctx)
+    mujoco.mjr_render(mujoco.MjrRect(0, 0, width, height), scene, ctx)
     return renderer
 
 
 def render_camera(
     model: mujoco.MjModel,
-    data: mujoco.MjData,
-    camera: str,
+    data: mujoco.MjData | None,
+    camera: str | mujoco.MjvScene,
     height: int,
     width: int,
     with_depth: bool = True,
     raw_depth: bool = False,
 ) -> tuple[np.ndarray, np.ndarray | None]:
-    """RGB ``(H, W, 3)`` uint8 and planar depth ``(H, W)`` float32 metres from one render pass.
+    """RGB ``(H, W, 3)`` uint8 and planar depth ``(H, W)`` float32 metres from one render pass of the
+    model camera ``camera`` in ``data``, or of a scene snapshot (:func:`update_camera_scene`; ``data``
+    unused).
 
     With ``with_depth=False`` the depth buffer is not read back and None is returned for it. With
     ``raw_depth=True`` the depth comes back as OpenGL left it: the reversed-Z buffer, rows bottom-up
@@ -183,8 +202,8 @@ def _water_pass(renderer: mujoco.Renderer, geometry: CameraGeometry) -> GLWaterP
 
 def render_camera_underwater(
     model: mujoco.MjModel,
-    data: mujoco.MjData,
-    camera: str,
+    data: mujoco.MjData | None,
+    camera: str | mujoco.MjvScene,
     geometry: CameraGeometry,
     water: WaterParams,
     height: int,

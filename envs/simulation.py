@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 import math
+import queue
 import time
 import weakref
 from collections.abc import Mapping
@@ -51,6 +52,7 @@ from envs.rendering import (
     render_camera,
     render_camera_underwater,
     renders_on_gpu,
+    update_camera_scene,
 )
 from envs.scenario import Scenario, load_scenario
 from envs.sensors import RobotSensors
@@ -81,6 +83,23 @@ class Contact:
     other: str
     position: tuple[float, float, float]
     normal_force_n: float
+
+
+# a snapshot's scene holds as many geoms as mujoco.Renderer's own does by default
+SNAPSHOT_MAX_GEOM = 10000
+
+
+@dataclass(frozen=True)
+class StereoSnapshot:
+    """A robot's stereo pair as it is at one moment, to draw later (:meth:`Simulation.stereo_snapshot`):
+    each camera's scene, and each frame's noise seed (None without the water model)."""
+
+    robot: str
+    scenes: tuple[mujoco.MjvScene, mujoco.MjvScene]
+    seeds: tuple[int | None, int | None]
+    water: bool
+    on_gl: bool
+    depth: bool
 
 
 class Simulation:
@@ -161,6 +180,8 @@ class Simulation:
         self._tracked: set[str] = set()
         self._estimators: dict[str, DeadReckoning] = {}
         self._readings: dict[str, dict] = {}
+        # scenes for stereo snapshots, reused: allocating one costs about 20 ms
+        self._free_scenes: queue.SimpleQueue[mujoco.MjvScene] = queue.SimpleQueue()
         self.reset()
 
     def close(self) -> None:
@@ -453,52 +474,80 @@ class Simulation:
         planar depth in metres. ``water`` applies the underwater image model, on the GL side
         where it can (see :attr:`water_backend`).
         """
+        return self.render_snapshot(self.stereo_snapshot(robot, depth=depth, water=water))
+
+    def stereo_snapshot(self, robot: str, depth: bool = False, water: bool = True) -> StereoSnapshot:
+        """What :meth:`render_stereo` would render now, taken now and drawn later by
+        :meth:`render_snapshot`: each camera's scene and its frame's noise seed (drawn from the
+        simulation's generator in the order render_stereo draws them). Drawing it on another thread,
+        while the physics steps on, gives the images of this moment, and the generator's stream is the
+        same as rendering at once."""
         spec = self._specs[self._check(robot)]
         if "stereo" not in spec.sensors:
             raise ValueError(f"{robot} has no stereo camera in this scenario")
-        cam = self.camera
         water = water and self.water.params.enabled
         on_gl = water and self.water_backend == "gl"
-        images: list = []  # arrays, or futures of the CPU water model's results
-        depths = []
+        scenes, seeds = [], []
         for side in ("left", "right"):
+            scene = self._free_scenes.get_nowait() if not self._free_scenes.empty() else None
+            scene = scene or mujoco.MjvScene(self.model, maxgeom=SNAPSHOT_MAX_GEOM)
+            scenes.append(update_camera_scene(self.model, self.data, f"{robot}/{side}", scene))
             if on_gl:
                 noisy = self.water.params.noise_sigma > 0
-                rgb, buffer = render_camera_underwater(
-                    self.model,
-                    self.data,
-                    f"{robot}/{side}",
-                    self._geometry,
-                    self.water.params,
-                    cam.height,
-                    cam.width,
-                    seed=int(self.rng.integers(1 << 32)) if noisy else 0,
-                    with_depth=depth,
-                )
+                seeds.append(int(self.rng.integers(1 << 32)) if noisy else 0)
+            elif water:
+                seeds.append(int(self.rng.integers(1 << 63)))  # the frame's own noise generator
             else:
-                rgb, buffer = render_camera(
-                    self.model,
-                    self.data,
-                    f"{robot}/{side}",
-                    cam.height,
-                    cam.width,
-                    with_depth=water or depth,
-                    raw_depth=True,
-                )
-            if buffer is not None:
-                buffer = cv2.add(cv2.flip(buffer, 0), self._geometry.depth_shift)
-            if water and not on_gl:
-                # range along each ray = (ray length per unit depth x d) / (buffer + c), in one division
-                ranges = cv2.divide(self._range_numerator, buffer)
-                # the left frame's water model runs on a worker thread while the right camera renders
-                # (OpenCV releases the GIL); each frame's noise generator is drawn here, in order
-                frame_rng = np.random.default_rng(int(self.rng.integers(1 << 63)))
-                rgb = worker_thread("maptidal-water").submit(self.water.apply, rgb, ranges, frame_rng)
-            images.append(rgb)
-            if depth:
-                depths.append(cv2.divide(self._geometry.depth_scale, buffer))
-        images = [image.result() if isinstance(image, Future) else image for image in images]
-        return (*images, *depths) if depth else tuple(images)
+                seeds.append(None)
+        return StereoSnapshot(robot, (scenes[0], scenes[1]), (seeds[0], seeds[1]), water, on_gl, depth)
+
+    def render_snapshot(self, snapshot: StereoSnapshot):
+        """Draw a :meth:`stereo_snapshot`: the images :meth:`render_stereo` returns. Call it on the thread
+        that renders for this simulation (the GL context's); the snapshot's scenes are reused after."""
+        cam = self.camera
+        images: list = []  # arrays, or futures of the CPU water model's results
+        depths = []
+        try:
+            for scene, seed in zip(snapshot.scenes, snapshot.seeds, strict=True):
+                if snapshot.on_gl:
+                    rgb, buffer = render_camera_underwater(
+                        self.model,
+                        None,
+                        scene,
+                        self._geometry,
+                        self.water.params,
+                        cam.height,
+                        cam.width,
+                        seed=seed,
+                        with_depth=snapshot.depth,
+                    )
+                else:
+                    rgb, buffer = render_camera(
+                        self.model,
+                        None,
+                        scene,
+                        cam.height,
+                        cam.width,
+                        with_depth=snapshot.water or snapshot.depth,
+                        raw_depth=True,
+                    )
+                if buffer is not None:
+                    buffer = cv2.add(cv2.flip(buffer, 0), self._geometry.depth_shift)
+                if snapshot.water and not snapshot.on_gl:
+                    # range along each ray = (ray length per unit depth x d) / (buffer + c), in one division
+                    ranges = cv2.divide(self._range_numerator, buffer)
+                    # the left frame's water model runs on a worker thread while the right camera renders
+                    # (OpenCV releases the GIL)
+                    frame_rng = np.random.default_rng(seed)
+                    rgb = worker_thread("maptidal-water").submit(self.water.apply, rgb, ranges, frame_rng)
+                images.append(rgb)
+                if snapshot.depth:
+                    depths.append(cv2.divide(self._geometry.depth_scale, buffer))
+            images = [image.result() if isinstance(image, Future) else image for image in images]
+        finally:
+            for scene in snapshot.scenes:
+                self._free_scenes.put(scene)
+        return (*images, *depths) if snapshot.depth else tuple(images)
 
     @property
     def water_backend(self) -> str:

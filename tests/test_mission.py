@@ -103,11 +103,11 @@ def test_the_same_seed_gives_the_same_mission_with_perception_apart_or_inline(sh
     # event, not merely alike
     scenario, _ = load_mission(None)
     _, first, first_out = short_mission
-    assert first["perception_worker"]["mode"] == "process"
+    assert first["parallel"]["perception"] == "process"
     again = Mission(
         scenario, MissionParams(duration_s=45.0, seed=3, perception_process=False), tmp_path
     ).run()
-    assert again["perception_worker"] == {"mode": "inline", "wait_s": 0.0}
+    assert again["parallel"]["perception"] == "inline"
     assert again["tasks"] == first["tasks"]
     assert again["comms"] == first["comms"]
     assert again["inspected_pct"] == first["inspected_pct"]

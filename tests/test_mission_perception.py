@@ -102,8 +102,9 @@ def test_a_worker_that_dies_is_a_clear_error_not_a_hang():
     try:
         perception.configure(_fronts(["rov0"]), DiscoveryParams())
         os.kill(perception.pid, signal.SIGKILL)
-        perception.submit(_job("rov0", 0))
+        # the send may find the pipe broken already, or the wait for the answer finds it closed
         with pytest.raises(RuntimeError, match="the perception worker exited"):
+            perception.submit(_job("rov0", 0))
             perception.result("rov0")
     finally:
         perception.close()

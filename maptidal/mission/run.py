@@ -32,6 +32,7 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,7 +40,7 @@ import numpy as np
 from controllers.estimation import rotation_from_rpy
 from controllers.pose import PoseController
 from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, Route
-from envs.rendering import check_render_samples
+from envs.rendering import check_render_samples, describe_renderer
 from envs.scenario import Scenario, inside_tank, load_scenario
 from envs.simulation import Simulation
 from envs.world import camera_offsets
@@ -313,7 +314,15 @@ class Mission:
         self.auction = AuctionSimulation(profiles, [], channel, AuctionParams(), params.agent, events=joining)
         self.writer = MissionWriter(out_dir)
         self.perception.configure(fronts, params.discovery)
-        self.sim.water_backend  # noqa: B018 - makes the renderer now, not in the first frame's time
+        # the robots' cameras render on a thread of their own, beside the physics (MuJoCo lets go of
+        # Python's lock while it draws): the renderer, and its GL context, are made there, and every draw
+        # of this simulation's cameras happens there. The loop takes a snapshot of the scene at the frame's
+        # moment (Simulation.stereo_snapshot), so the images do not depend on when the thread draws them
+        self._gl = ThreadPoolExecutor(1, thread_name_prefix="maptidal-gl")
+        self.renderer = self._gl.submit(self._make_renderer).result()
+        self._frames_render_s = 0.0  # the GL thread's time drawing the frames perception takes
+        self._waited_s = 0.0  # the loop's time waiting for a frame's drawing and its answer
+        self._frames: dict[str, Future] = {}  # each robot's frame being drawn and handed to perception
         self.tasks: dict[int, dict] = {}  # key -> record (the mission's own ledger, for the outputs)
         self.timing = dict.fromkeys(
             ("physics", "rendering", "perception", "discovery", "allocation", "control"), 0.0
@@ -438,7 +447,10 @@ class Mission:
         try:
             return self._run(progress)
         finally:
-            self.perception.close()  # the worker process goes, whatever ended the mission
+            # whatever ended the mission: the worker process goes, and the renderer, on its own thread
+            self.perception.close()
+            self._gl.submit(self.sim.close).result()
+            self._gl.shutdown()
 
     def _run(self, progress: Callable[[float, int, int, float, float], None] | None) -> dict:
         p = self.params
@@ -526,7 +538,6 @@ class Mission:
         if self.video is not None:
             document["video"] = {"file": self.video.path.name, "frames": self.video.frames}
         self.writer.finish(document, self.captured_views(), self.scenario.tank)
-        self.sim.close()
         return document
 
     def _poses(self, robot: _Robot) -> dict:
@@ -556,28 +567,50 @@ class Mission:
             self.sim.set_current(event.current)
             self.writer.event(now, "current", current=list(event.current))
 
-    def _see(self, robot: _Robot, now: float) -> None:
-        """Render the robot's stereo pair, take its previous frame's answer from perception, and send it
-        this frame with the tasks it knows now."""
+    def _make_renderer(self) -> str:
+        # on the GL thread: the renderer's context is made, and stays current, there
+        height, width = self.params.image_size[1], self.params.image_size[0]
+        self.sim.water_backend  # noqa: B018 - makes the renderer now, not in the first frame's time
+        return describe_renderer(self.sim.model, height, width)
+
+    def _render(self, robot: str) -> tuple[np.ndarray, np.ndarray]:
+        """The robot's stereo pair now, drawn on the GL thread (the loop waits for it)."""
+        return self._gl.submit(self.sim.render_snapshot, self.sim.stereo_snapshot(robot)).result()
+
+    def _draw_frame(self, snapshot, job: FrameJob) -> np.ndarray:
+        # on the GL thread: draw the frame's snapshot and hand the pair to perception
         start = time.perf_counter()
-        left, right = self.sim.render_stereo(robot.name)
-        robot.last_left = left
+        left, right = self.sim.render_snapshot(snapshot)
+        self._frames_render_s += time.perf_counter() - start
+        self.perception.submit(dataclasses.replace(job, left=left, right=right))
+        return left
+
+    def _see(self, robot: _Robot, now: float) -> None:
+        """Take the robot's previous frame's answer from perception, then snapshot this frame, to be
+        drawn on the GL thread and sent to perception with the tasks the robot knows now."""
+        previous = self._frames.pop(robot.name, None)
+        if previous is not None:
+            start = time.perf_counter()
+            robot.last_left = previous.result()  # drawn and sent by now, almost always
+            result = self.perception.result(robot.name)
+            self._waited_s += time.perf_counter() - start
+            self._use_frame_result(robot, result, now)
+        start = time.perf_counter()
+        snapshot = self.sim.stereo_snapshot(robot.name)
         self.timing["rendering"] += time.perf_counter() - start
-        if self.perception.pending(robot.name):
-            self._use_frame_result(robot, self.perception.result(robot.name), now)
         base = "truth" if self.params.pose_source == "truth" else "dr"
         known = self.auction.agents[robot.index].tasks
         existing = np.array([np.concatenate((t.position, t.direction)) for t in known]).reshape(-1, 6)
         job = FrameJob(
             robot.name,
             now,
-            left,
-            right,
+            None,
+            None,
             self._camera_pose(robot, base),
             self._camera_pose(robot, "dr"),
             existing,
         )
-        self.perception.submit(job)
+        self._frames[robot.name] = self._gl.submit(self._draw_frame, snapshot, job)
 
     def _use_frame_result(self, robot: _Robot, result: FrameResult, now: float) -> None:
         """A frame's answer, one frame period after it was taken: the visual fix to fly on, and the new
@@ -681,7 +714,7 @@ class Mission:
                 self.writer.event(now, "timeout", robot=robot.name, task=key)
 
     def _capture(self, robot: _Robot, key: int, now: float) -> None:
-        left, _ = self.sim.render_stereo(robot.name)
+        left, _ = self._render(robot.name)
         image = self.writer.image(f"task_{key}_{robot.name}.png", left)
         truth = self._camera_pose(robot, "truth")
         self.captured.append(np.r_[truth.position, truth.forward])
@@ -739,8 +772,16 @@ class Mission:
             # captures of a task already captured (by this robot or another): what a conflict costs
             "duplicate_inspections": sum(n - 1 for n in self.inspections.values()),
             "tasks": sorted(self.tasks.values(), key=lambda t: t["id"]),
-            # perception and discovery's timing is the worker's; in a process of its own it runs beside the
-            # rest, and wait_s is how long the loop waited for it
-            "timing": dict(self.timing),
-            "perception_worker": {"mode": self.perception.mode, "wait_s": self.perception.wait_s},
+            # each stage's own time, wherever it ran; "parallel" says what ran beside the loop
+            "timing": {**self.timing, "rendering": self.timing["rendering"] + self._frames_render_s},
+            "parallel": {
+                "perception": self.perception.mode,  # "process": a worker process; "inline": the GL thread
+                "beside_the_loop_s": {
+                    "rendering": self._frames_render_s,  # the frames perception takes, on the GL thread
+                    "perception": self.timing["perception"],
+                    "discovery": self.timing["discovery"],
+                },
+                "loop_waited_s": self._waited_s,  # for a frame's drawing and its answer
+            },
+            "renderer": self.renderer,
         }

@@ -52,7 +52,6 @@ def floor_factor(scenario, params, duration_s: float) -> float:
 
 def main() -> None:
     """Print the mission's real-time factor, its timing breakdown and the ratio to the floor."""
-    from envs.rendering import describe_renderer
     from maptidal.mission.config import prepare_mission
     from maptidal.mission.outputs import read_events
     from maptidal.mission.run import Mission
@@ -93,8 +92,8 @@ def main() -> None:
     scratch = tempfile.TemporaryDirectory()
     out_dir = Path(scratch.name)
     mission = Mission(scenario, params, out_dir)
-    renderer = describe_renderer(mission.sim.model, params.image_size[1], params.image_size[0])
     document = mission.run()
+    renderer = document["renderer"]
     timing = document["timing"]
     wall = document["wall_time_s"]
     print(f"renderer: {renderer}")
@@ -105,20 +104,20 @@ def main() -> None:
     print(f"floor (stepping + stereo renders only): {floor:6.1f}x real time")
     print(f"mission:                                {document['realtime_factor']:6.1f}x real time")
     print(f"mission / floor: {document['realtime_factor'] / floor:.2f} (the goal is 10x real time)")
-    worker = document["perception_worker"]
-    beside = ("perception", "discovery") if worker["mode"] == "process" else ()
-    loop = {name: s for name, s in timing.items() if name not in beside}
-    if beside:
-        loop["waiting"] = worker["wait_s"]  # for the worker's answer to a frame
-    print(f"where the mission's wall time goes (perception: {worker['mode']}):")
+    parallel = document["parallel"]
+    beside = parallel["beside_the_loop_s"]
+    loop = {name: s - beside.get(name, 0.0) for name, s in timing.items()}
+    loop = {name: s for name, s in loop.items() if s > 1e-6}
+    loop["waiting"] = parallel["loop_waited_s"]  # for a frame's drawing and its answer
+    print("where the loop's wall time goes:")
     for name, seconds in sorted(loop.items(), key=lambda kv: -kv[1]):
         print(f"  {name:<11} {seconds:6.2f} s  {100 * seconds / wall:5.1f} %")
     rest = wall - sum(loop.values())
     print(f"  {'the loop':<11} {rest:6.2f} s  {100 * rest / wall:5.1f} %  (activities, logs, snapshots)")
-    if beside:
-        print("beside it, in the perception worker's process:")
-        for name in beside:
-            print(f"  {name:<11} {timing[name]:6.2f} s  {100 * timing[name] / wall:5.1f} % of the wall time")
+    where = "a worker process" if parallel["perception"] == "process" else "the GL thread"
+    print(f"beside it: the frames drawn on the GL thread, perception and discovery on {where}:")
+    for name, seconds in beside.items():
+        print(f"  {name:<11} {seconds:6.2f} s  {100 * seconds / wall:5.1f} % of the wall time")
     events = read_events(out_dir)
     for robot in mission.robots:
         count = sum(1 for e in events if e["kind"] == "keyframe" and e["robot"] == robot)
