@@ -503,7 +503,9 @@ class Simulation:
 
     def render_snapshot(self, snapshot: StereoSnapshot):
         """Draw a :meth:`stereo_snapshot`: the images :meth:`render_stereo` returns. Call it on the thread
-        that renders for this simulation (the GL context's); the snapshot's scenes are reused after."""
+        that renders for this simulation: the renderer's GL context is current on the thread that first
+        drew (or read :attr:`water_backend`), and may not be made current on another while it is. The
+        snapshot's scenes are reused after."""
         cam = self.camera
         images: list = []  # arrays, or futures of the CPU water model's results
         depths = []

@@ -3,6 +3,7 @@
 import gc
 import json
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import cv2
@@ -368,3 +369,30 @@ def test_render_samples_sets_the_anti_aliasing_and_keeps_the_geometry():
     for bad in (-1, 2.0, True, 17):
         with pytest.raises(ValueError, match="render_samples"):
             facing_wall(distance, WaterParams(enabled=False), render_samples=bad)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_stereo_snapshot_draws_its_moment_after_the_physics_moves_on(backend):
+    # the mission takes a snapshot at the frame's moment and draws it on its GL thread while the physics
+    # steps on: the images must be those of the moment, noise and all, on either water backend
+    water = WaterParams(turbidity=0.4, noise_sigma=3.0)
+    at_once, later = facing_wall(0.9, water, backend), facing_wall(0.9, water, backend)
+    turn = {"rov": np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.3])}
+    with ThreadPoolExecutor(1) as gl_thread:
+        # the renderer, and its GL context, belong to the thread that makes them
+        gl_thread.submit(lambda: later.water_backend).result()
+        for sim in (at_once, later):
+            sim.reset(seed=5)
+            for _ in range(10):
+                sim.step(turn)
+        expected = at_once.render_stereo("rov")
+        snapshot = later.stereo_snapshot("rov")
+        for _ in range(50):  # the robot turns away meanwhile
+            later.step(turn)
+        drawn = gl_thread.submit(later.render_snapshot, snapshot).result()
+        moved = gl_thread.submit(later.render_stereo, "rov").result()
+        gl_thread.submit(later.close).result()
+    at_once.close()
+    for mine, theirs in zip(drawn, expected, strict=True):
+        np.testing.assert_array_equal(mine, theirs)
+    assert np.abs(moved[0].astype(int) - drawn[0].astype(int)).mean() > 1.0  # the view did change
