@@ -428,3 +428,25 @@ def test_a_robot_keeps_clear_of_two_teammates_at_once(tmp_path):
     for position, _ in peers.values():
         assert np.linalg.norm(moved - position) >= 1.0 - 1e-9
     mission.sim.close()
+
+
+def test_a_mission_that_cannot_start_leaves_no_worker_behind(monkeypatch, tmp_path):
+    import maptidal.mission.run as run_module
+
+    started = []
+
+    def start_and_keep(*args, **kwargs):
+        started.append(run_module.start_perception.__wrapped__(*args, **kwargs))
+        return started[-1]
+
+    def no_simulator(*args, **kwargs):
+        raise RuntimeError("no simulator today")
+
+    start_and_keep.__wrapped__ = run_module.start_perception
+    monkeypatch.setattr(run_module, "start_perception", start_and_keep)
+    monkeypatch.setattr(run_module, "Simulation", no_simulator)
+    scenario, _ = load_mission(None)
+    with pytest.raises(RuntimeError, match="no simulator today"):
+        Mission(scenario, MissionParams(duration_s=5.0), tmp_path)
+    (perception,) = started
+    assert perception.mode == "process" and not _alive(perception.pid)
