@@ -127,7 +127,7 @@ class MissionParams:
     # for the lens's blur; 0 halves the render time on Mesa's CPU rasteriser (README, "Closed-loop mission")
     render_samples: int = 4
     # the robots' perception and discovery in a worker process on a second core (False: in the mission's
-    # own process, about 1.4 times slower on 2 cores, with the same results; maptidal.mission.perception)
+    # own process, on its drawing thread: 1.1 to 1.3 times slower on 2 cores, with the same results)
     perception_process: bool = True
     pose_source: str = "vo"
     explore_yaw_deg: float = 60.0
@@ -144,8 +144,8 @@ class MissionParams:
     # a keyframe at every 1 Hz frame, the issue's 1 to 2 Hz. Until session 12 it was one per 25 cm or
     # 20 deg, at most one a second and one every 4 s while the view stood still (0.26 to 0.34 Hz), on the
     # reasoning that a hovering robot's keyframes add tasks only from the mesh noise; over seeds 0 to 4
-    # the keyframe at every frame did more tasks (41.8 against 36.8 a mission, mean) and left less of the
-    # walls uninspected (11.7 against 15.3 %), with no task inspected twice (README, "Closed-loop mission")
+    # the two did as well (36.4 against 36.8 tasks done a mission, mean; 14.3 against 15.3 % of the walls
+    # uninspected), with no task inspected twice (README, "Closed-loop mission")
     keyframes: KeyframeParams = field(
         default_factory=lambda: KeyframeParams(min_interval_s=1.0, max_interval_s=1.0)
     )
