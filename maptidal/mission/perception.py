@@ -7,7 +7,8 @@ period later, as a robot's companion computer delivers its map with a latency wh
 That fixed latency is what lets the work run in a process of its own on a second core
 (:class:`PerceptionProcess`) and give the same mission, number for number, as running it in the mission's
 own process (:class:`InlinePerception`): the answer depends only on the frame, never on when the worker
-finished.
+finished. One thread may submit while another takes results, for different robots (the mission's
+drawing thread submits each frame as it is drawn; its loop takes the answers).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import multiprocessing
 import queue
+import signal
 import threading
 import time
 import traceback
@@ -138,6 +140,8 @@ def _serve(connection, blocks: dict, shape: tuple) -> None:
     """The worker process: take the front ends and discovery parameters, then run jobs in the order they
     come and send back each result (or the error). A job's images are in its robot's shared block, which
     the mission leaves alone until the result is back."""
+    # Ctrl-C is the mission's to handle: it closes the pipe, and this process then ends on its own
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # one OpenCV thread: the second core is this process's, the first the mission's and its renderer's
     cv2.setNumThreads(1)
     images = _image_views(blocks, shape)
