@@ -60,7 +60,7 @@ from envs.water import WaterModel, depth_to_range, worker_thread
 from envs.world import DEPTH_SENSOR_POSITION, RobotPlacement, camera_offsets, compose
 from maptidal.camera import StereoCameraParams
 
-WATER_BACKENDS = ("auto", "gl", "cpu")
+WATER_BACKENDS = ("auto", "gl", "cpu", "prefer-gl")
 
 
 # the warnings MuJoCo counts when it resets a bad state itself
@@ -556,7 +556,10 @@ class Simulation:
         """Where the water model runs: ``"gl"`` (a shader in the renderer's context) or ``"cpu"``
         (:class:`envs.water.WaterModel`). ``"gl"`` at construction raises RuntimeError where the
         shader cannot run. ``"auto"`` picks GL on a GPU and the CPU model on a CPU rasteriser
-        (Mesa llvmpipe), where the shader is no faster (README, rendering bench)."""
+        (Mesa llvmpipe), where the shader is no faster when drawing is all the process does (README,
+        rendering bench). ``"prefer-gl"`` takes the shader wherever it runs, else the CPU model: the
+        mission's choice, since with its cameras drawn beside the physics on a busy CPU the shader,
+        which spares the depth read-back and the CPU's water model, is the faster (README, mission)."""
         if self._resolved_water_backend is None:
             requested = self._requested_water_backend
             height, width = self.camera.height, self.camera.width

@@ -396,3 +396,21 @@ def test_a_stereo_snapshot_draws_its_moment_after_the_physics_moves_on(backend):
     for mine, theirs in zip(drawn, expected, strict=True):
         np.testing.assert_array_equal(mine, theirs)
     assert np.abs(moved[0].astype(int) - drawn[0].astype(int)).mean() > 1.0  # the view did change
+
+
+@pytest.mark.parametrize("shader_runs", [True, False])
+def test_prefer_gl_takes_the_shader_where_it_runs_and_the_cpu_model_elsewhere(monkeypatch, shader_runs):
+    import envs.simulation as simulation_module
+
+    monkeypatch.setattr(simulation_module, "gl_water_available", lambda *args: shader_runs)
+    monkeypatch.setattr(simulation_module, "renders_on_gpu", lambda *args: False)  # a CPU rasteriser
+    preferred = facing_wall(0.9, WaterParams(), "prefer-gl")
+    assert preferred.water_backend == ("gl" if shader_runs else "cpu")
+    # where "auto" keeps the CPU model on a CPU rasteriser, and "gl" insists
+    assert facing_wall(0.9, WaterParams(), "auto").water_backend == "cpu"
+    insisting = Simulation(facing_wall(0.9, WaterParams()).scenario, water_backend="gl")
+    if shader_runs:
+        assert insisting.water_backend == "gl"
+    else:
+        with pytest.raises(RuntimeError, match="cannot run"):
+            insisting.water_backend  # noqa: B018

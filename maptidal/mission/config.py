@@ -8,6 +8,7 @@
     clearance_m = 1.0      # how far a robot keeps from lower-indexed teammates (0: not at all)
     render_samples = 4     # the images' anti-aliasing samples (0: off, about twice as fast on a CPU)
     perception_process = true  # perception and discovery in a worker process (false: inline, slower)
+    water_backend = "prefer-gl"  # where the water model runs: prefer-gl, gl, cpu or auto (Simulation's)
     [[mission.events]]
     time_s = 60
     kind = "fail"          # rov1 stops and falls silent
@@ -47,6 +48,7 @@ MISSION_KEYS = {
     "clearance_m",
     "render_samples",
     "perception_process",
+    "water_backend",
 }
 EVENT_KEYS = {"time_s", "kind", "robot", "current", "duration_s", "robots"}
 
@@ -67,7 +69,13 @@ def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
             if not isinstance(value, bool):
                 raise ValueError(f"{path}: [mission] {key} must be true or false, got {value!r}")
             continue
-        wanted = str if key == "pose_source" else int if key == "render_samples" else (int, float)
+        wanted = (
+            str
+            if key in ("pose_source", "water_backend")
+            else int
+            if key == "render_samples"
+            else (int, float)
+        )
         if not isinstance(value, wanted) or isinstance(value, bool):
             kind = "a string" if wanted is str else "a whole number" if wanted is int else "a number"
             raise ValueError(f"{path}: [mission] {key} must be {kind}, got {value!r}")

@@ -32,6 +32,7 @@ def floor_factor(scenario, params, duration_s: float) -> float:
         camera=StereoCameraParams(width=width, height=height),
         flight_mode="stabilize",
         render_samples=params.render_samples,
+        water_backend=params.water_backend,
     )
     sim.reset(seed=params.seed)
     names = [r.name for r in scenario.robots]
