@@ -455,3 +455,14 @@ def test_a_mission_that_cannot_start_leaves_no_worker_behind(monkeypatch, tmp_pa
         Mission(scenario, MissionParams(duration_s=5.0), tmp_path)
     (perception,) = started
     assert perception.mode == "process" and not _alive(perception.pid)
+
+
+def test_a_mission_with_no_task_done_still_writes_every_plot_and_a_whole_report(tmp_path):
+    scenario, _ = load_mission(None)
+    document = Mission(scenario, MissionParams(duration_s=4.0), tmp_path).run()
+    assert not any(t["completed"] for t in document["tasks"])
+    occluded = document["coverage"]["occluded"]
+    assert occluded["n_viewpoints"] == 0 and occluded["pct_uninspected"] == 100.0
+    assert occluded["histogram"][0] == 1.0 and occluded["mad"] > 0  # every voxel unseen, against gamma
+    for name in ("top_view.png", "timeline.png", "histogram.png", "voxel_views.png", "report.md"):
+        assert (tmp_path / name).stat().st_size > 0, name

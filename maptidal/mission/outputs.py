@@ -74,15 +74,14 @@ class MissionWriter:
 
 def coverage_of(views: np.ndarray, tank) -> tuple[dict, tuple | None]:
     """[coverage]'s report of the viewpoints ``(N, 6)``, with occlusion on and off, and the occluded
-    evaluation (model, report, views per voxel) for the plots (None without viewpoints)."""
+    evaluation (model, report, views per voxel) for the plots. With no viewpoint (no task done yet) the
+    report is whole too: every voxel unseen, and the plots say so."""
     from maptidal.coverage import CoverageModel, CoverageParams
 
     out, occluded = {}, None
+    views = np.asarray(views, float).reshape(-1, 6)
     for occlusion in (True, False):
         name = "occluded" if occlusion else "unoccluded"
-        if len(views) == 0:
-            out[name] = {"n_viewpoints": 0, "pct_uninspected": 100.0}
-            continue
         model = CoverageModel.from_tank(tank, CoverageParams(occlusion=occlusion))
         report, per_voxel = model.evaluate(views)
         out[name] = report.to_dict()
