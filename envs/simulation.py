@@ -489,8 +489,10 @@ class Simulation:
         on_gl = water and self.water_backend == "gl"
         scenes, seeds = [], []
         for side in ("left", "right"):
-            scene = self._free_scenes.get_nowait() if not self._free_scenes.empty() else None
-            scene = scene or mujoco.MjvScene(self.model, maxgeom=SNAPSHOT_MAX_GEOM)
+            try:
+                scene = self._free_scenes.get_nowait()
+            except queue.Empty:
+                scene = mujoco.MjvScene(self.model, maxgeom=SNAPSHOT_MAX_GEOM)
             scenes.append(update_camera_scene(self.model, self.data, f"{robot}/{side}", scene))
             if on_gl:
                 noisy = self.water.params.noise_sigma > 0

@@ -79,6 +79,13 @@ def test_every_output_exists_and_parses(short_mission):
     assert rows[0].startswith("time_s,robot") and len(rows) > 40
     for name in ("top_view.png", "timeline.png", "histogram.png", "voxel_views.png", "report.md"):
         assert (out / name).stat().st_size > 0, name
+    # what ran beside the loop, and on what: the drawing thread's and the worker's own seconds
+    beside = saved["parallel"]["beside_the_loop_s"]
+    assert saved["parallel"]["perception"] == "process" and saved["renderer"]
+    assert 0 < beside["rendering"] <= saved["timing"]["rendering"]
+    assert beside["perception"] == saved["timing"]["perception"] > 0
+    report = (out / "report.md").read_text()
+    assert "Where the wall time went" in report and saved["renderer"] in report
 
 
 def test_a_frames_tasks_enter_the_auction_at_the_robots_next_frame(short_mission):

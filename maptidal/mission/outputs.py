@@ -239,6 +239,7 @@ def report_markdown(document: dict) -> str:
         f"on): {m['pct_uninspected']:.1f} % of the walls uninspected. Comms: {m['messages']} messages, "
         f"{m['bytes']} bytes, {m['lost']} lost.",
         "",
+        *timing_lines(document),
         "![top view](top_view.png)",
         "",
         "![timeline](timeline.png)",
@@ -249,6 +250,36 @@ def report_markdown(document: dict) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def timing_lines(document: dict) -> list[str]:
+    """``report.md``'s lines on where the wall time went: each stage's own seconds, and whether it ran in
+    the loop or beside it (``mission.json``'s ``timing`` and ``parallel``); none for a document without
+    timing."""
+    timing = document.get("timing")
+    if not timing:
+        return []
+    parallel = document.get("parallel", {})
+    beside = parallel.get("beside_the_loop_s", {})
+    wall = document.get("wall_time_s") or 0.0
+    rows = ["| stage | in the loop (s) | beside it (s) |", "|---|---|---|"]
+    for stage, seconds in timing.items():
+        apart = beside.get(stage, 0.0)
+        rows.append(f"| {stage} | {seconds - apart:.2f} | {apart:.2f} |")
+    if "loop_waited_s" in parallel:
+        rows.append(f"| waiting for frames and answers | {parallel['loop_waited_s']:.2f} | |")
+    where = {"process": "in a worker process", "inline": "on the drawing thread"}
+    lines = [
+        "## Where the wall time went",
+        "",
+        f"{wall:.1f} s of wall time in all. The frames are drawn on a thread of their own, and perception "
+        f"runs {where.get(parallel.get('perception'), 'beside the loop')}."
+        + (f" Renderer: {document['renderer']}." if document.get("renderer") else ""),
+        "",
+        *rows,
+        "",
+    ]
+    return lines
 
 
 def summary_table(document: dict) -> str:

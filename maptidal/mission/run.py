@@ -264,7 +264,7 @@ class Mission:
             names, (height, width, 3), in_process=not params.perception_process
         )
         try:
-            self._build(params, names, joins, outages, out_dir)
+            self._build(params, joins, outages, out_dir)
         except BaseException:
             # a mission that cannot start leaves no worker process, nor a thread, behind
             self.perception.close()
@@ -272,7 +272,7 @@ class Mission:
                 self._gl.shutdown()
             raise
 
-    def _build(self, params: MissionParams, names: list[str], joins: dict, outages: tuple, out_dir) -> None:
+    def _build(self, params: MissionParams, joins: dict, outages: tuple, out_dir) -> None:
         """The simulator, the robots, the auction and the outputs (``__init__``'s work past the checks)."""
         width, height = params.image_size
         self.sim = Simulation(
@@ -338,7 +338,7 @@ class Mission:
         # of this simulation's cameras happens there. The loop takes a snapshot of the scene at the frame's
         # moment (Simulation.stereo_snapshot), so the images do not depend on when the thread draws them
         self._gl = ThreadPoolExecutor(1, thread_name_prefix="maptidal-gl")
-        self.renderer = self._gl.submit(self._make_renderer).result()
+        self.renderer_description = self._gl.submit(self._make_renderer).result()
         self._frames_render_s = 0.0  # the GL thread's time drawing the frames perception takes
         self._waited_s = 0.0  # the loop's time waiting for a frame's drawing and its answer
         self._frames: dict[str, Future] = {}  # each robot's frame being drawn and handed to perception
@@ -802,5 +802,5 @@ class Mission:
                 },
                 "loop_waited_s": self._waited_s,  # for a frame's drawing and its answer
             },
-            "renderer": self.renderer,
+            "renderer": self.renderer_description,
         }
