@@ -473,3 +473,25 @@ def test_a_mission_with_no_task_done_still_writes_every_plot_and_a_whole_report(
     assert occluded["histogram"][0] == 1.0 and occluded["mad"] > 0  # every voxel unseen, against gamma
     for name in ("top_view.png", "timeline.png", "histogram.png", "voxel_views.png", "report.md"):
         assert (tmp_path / name).stat().st_size > 0, name
+
+
+def test_a_mission_the_physics_fails_in_raises_and_leaves_no_worker_nor_thread(tmp_path):
+    import threading
+
+    from envs.simulation import SimulationError
+
+    scenario, _ = load_mission(None)
+    mission = Mission(scenario, MissionParams(duration_s=20.0), tmp_path)
+    step = mission.sim.step
+
+    def diverging(*args, **kwargs):
+        if mission.sim.time > 5.0:
+            raise SimulationError("the physics state became NaN")
+        return step(*args, **kwargs)
+
+    mission.sim.step = diverging
+    with pytest.raises(SimulationError, match="NaN"):
+        mission.run()
+    assert not _alive(mission.perception.pid)
+    assert not [t for t in threading.enumerate() if t.name.startswith("maptidal-gl")]
+    assert any(e["kind"] == "keyframe" for e in read_events(tmp_path))  # the log so far is readable
