@@ -495,3 +495,19 @@ def test_a_mission_the_physics_fails_in_raises_and_leaves_no_worker_nor_thread(t
     assert not _alive(mission.perception.pid)
     assert not [t for t in threading.enumerate() if t.name.startswith("maptidal-gl")]
     assert any(e["kind"] == "keyframe" for e in read_events(tmp_path))  # the log so far is readable
+
+
+def test_drawing_on_the_loops_own_thread_gives_the_same_mission(short_mission, tmp_path, monkeypatch):
+    # under MUJOCO_GL=glfw, whose contexts stay on the main thread, the loop draws its cameras itself:
+    # the snapshots make that the same mission, event for event
+    import maptidal.mission.run as run_module
+
+    monkeypatch.setattr(run_module, "_drawing_thread", run_module._SameThread)
+    scenario, _ = load_mission(None)
+    _, first, first_out = short_mission
+    again = Mission(scenario, MissionParams(duration_s=45.0, seed=3), tmp_path)
+    assert isinstance(again._gl, run_module._SameThread)
+    document = again.run()
+    assert document["tasks"] == first["tasks"] and document["comms"] == first["comms"]
+    without_start = lambda out: [e for e in read_events(out) if e["kind"] != "start"]  # noqa: E731
+    assert without_start(tmp_path) == without_start(first_out)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -222,6 +223,28 @@ class _Robot:
         return self.activity not in ("waiting", "failed")
 
 
+def _drawing_thread() -> ThreadPoolExecutor:
+    """The thread the mission's cameras are drawn on."""
+    return ThreadPoolExecutor(1, thread_name_prefix="maptidal-gl")
+
+
+class _SameThread:
+    """An executor that runs each call at once on the caller's thread (the mission's drawing where GL
+    contexts may not move off the main thread)."""
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        """Run ``fn`` now; a Future with its result, or its exception."""
+        future: Future = Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except BaseException as error:  # the caller sees it at .result(), as with a thread
+            future.set_exception(error)
+        return future
+
+    def shutdown(self, wait: bool = True) -> None:
+        """Nothing to stop."""
+
+
 def check_events(events: tuple[MissionEvent, ...], names: list[str]) -> dict[str, float]:
     """Check scripted events against the scenario's robots (ValueError naming the problem); returns the
     join time of each robot that joins later."""
@@ -336,8 +359,9 @@ class Mission:
         # the robots' cameras render on a thread of their own, beside the physics (MuJoCo lets go of
         # Python's lock while it draws): the renderer, and its GL context, are made there, and every draw
         # of this simulation's cameras happens there. The loop takes a snapshot of the scene at the frame's
-        # moment (Simulation.stereo_snapshot), so the images do not depend on when the thread draws them
-        self._gl = ThreadPoolExecutor(1, thread_name_prefix="maptidal-gl")
+        # moment (Simulation.stereo_snapshot), so the images do not depend on when the thread draws them.
+        # GLFW makes its contexts on the main thread only, so under MUJOCO_GL=glfw the loop draws itself
+        self._gl = _SameThread() if os.environ.get("MUJOCO_GL") == "glfw" else _drawing_thread()
         self.renderer_description = self._gl.submit(self._make_renderer).result()
         self._frames_render_s = 0.0  # the GL thread's time drawing the frames perception takes
         self._waited_s = 0.0  # the loop's time waiting for a frame's drawing and its answer
