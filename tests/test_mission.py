@@ -102,6 +102,10 @@ def test_a_frames_tasks_enter_the_auction_at_the_robots_next_frame(short_mission
     found = {t["id"]: t["found_at_s"] for t in document["tasks"]}
     for event in (e for e in events if e["kind"] == "discovered"):
         assert found[event["task"]] == event["t"] and event["frame_s"] < event["t"]
+    # the robots' cameras are not in step: rov0's frames fall on the second, rov1's half a second later
+    for name, phase in (("rov0", 0.0), ("rov1", 0.5)):
+        offsets = {round(e["frame_s"] % 1.0, 2) for e in keyframes if e["robot"] == name}
+        assert offsets and all(abs(o - phase) <= period + 1e-6 for o in offsets), (name, offsets)
 
 
 def test_the_same_seed_gives_the_same_mission_with_perception_apart_or_inline(short_mission, tmp_path):
