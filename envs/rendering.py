@@ -127,16 +127,9 @@ def update_camera_scene(
     return scene
 
 
-def _draw(
-    model: mujoco.MjModel, data: mujoco.MjData | None, camera: str | mujoco.MjvScene, height: int, width: int
-) -> mujoco.Renderer:
-    """Draw ``camera`` (a model camera's name, seen in ``data`` now, or a scene snapshot) into the shared
-    renderer's off-screen buffer; returns that renderer."""
+def _draw(model: mujoco.MjModel, scene: mujoco.MjvScene, height: int, width: int) -> mujoco.Renderer:
+    """Draw ``scene`` into the shared renderer's off-screen buffer; returns that renderer."""
     renderer = shared_renderer(model, height, width)
-    if isinstance(camera, mujoco.MjvScene):
-        scene = camera
-    else:
-        scene = update_camera_scene(model, data, camera, renderer.scene)
     ctx = renderer._mjr_context  # the Renderer's own context: reuse it rather than make another
     renderer._gl_context.make_current()
     mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, ctx)
@@ -146,21 +139,19 @@ def _draw(
 
 def render_camera(
     model: mujoco.MjModel,
-    data: mujoco.MjData | None,
-    camera: str | mujoco.MjvScene,
+    scene: mujoco.MjvScene,
     height: int,
     width: int,
     with_depth: bool = True,
     raw_depth: bool = False,
 ) -> tuple[np.ndarray, np.ndarray | None]:
-    """RGB ``(H, W, 3)`` uint8 and planar depth ``(H, W)`` float32 metres from one render pass of the
-    model camera ``camera`` in ``data``, or of a scene snapshot (:func:`update_camera_scene`; ``data``
-    unused).
+    """RGB ``(H, W, 3)`` uint8 and planar depth ``(H, W)`` float32 metres from one render pass of a
+    camera's scene (:func:`update_camera_scene`).
 
     With ``with_depth=False`` the depth buffer is not read back and None is returned for it. With
     ``raw_depth=True`` the depth comes back as OpenGL left it: the reversed-Z buffer, rows bottom-up
     (see :func:`depth_coefficients` to convert it in one step with other per-pixel factors)."""
-    renderer = _draw(model, data, camera, height, width)
+    renderer = _draw(model, scene, height, width)
     rect = mujoco.MjrRect(0, 0, width, height)
     ctx = renderer._mjr_context
     rgb = np.empty((height, width, 3), np.uint8)
@@ -202,8 +193,7 @@ def _water_pass(renderer: mujoco.Renderer, geometry: CameraGeometry) -> GLWaterP
 
 def render_camera_underwater(
     model: mujoco.MjModel,
-    data: mujoco.MjData | None,
-    camera: str | mujoco.MjvScene,
+    scene: mujoco.MjvScene,
     geometry: CameraGeometry,
     water: WaterParams,
     height: int,
@@ -214,7 +204,7 @@ def render_camera_underwater(
     """Like :func:`render_camera` with ``raw_depth=True``, but the water model runs on the GL side
     (:mod:`envs.gl_water`) and the returned RGB is already the underwater image. Call
     :func:`gl_water_available` first: this raises RuntimeError where the shader cannot run."""
-    renderer = _draw(model, data, camera, height, width)
+    renderer = _draw(model, scene, height, width)
     water_pass = _water_pass(renderer, geometry)
     if water_pass is None:
         raise RuntimeError("the GL water pass is unavailable in this GL context")

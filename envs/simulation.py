@@ -63,6 +63,13 @@ from maptidal.camera import StereoCameraParams
 WATER_BACKENDS = ("auto", "gl", "cpu", "prefer-gl")
 
 
+def check_water_backend(backend: object) -> str:
+    """``backend`` if it names a water backend (:attr:`Simulation.water_backend`), else ValueError."""
+    if backend not in WATER_BACKENDS:
+        raise ValueError(f"water_backend must be one of {WATER_BACKENDS}, got {backend!r}")
+    return backend
+
+
 # the warnings MuJoCo counts when it resets a bad state itself
 _BAD_STATE_WARNINGS = [
     int(mujoco.mjtWarning.mjWARN_BADQPOS),
@@ -159,8 +166,7 @@ class Simulation:
             )
             self._mixers[robot.name] = MixerParams(frame=robot.vehicle.ardusub_frame)
             self._vehicle_models[robot.name] = robot.vehicle.controller_model()
-        if water_backend not in WATER_BACKENDS:
-            raise ValueError(f"water_backend must be one of {WATER_BACKENDS}, got {water_backend!r}")
+        check_water_backend(water_backend)
         self.water = WaterModel(self.scenario.water)
         self._requested_water_backend = water_backend
         self._resolved_water_backend: str | None = None
@@ -516,7 +522,6 @@ class Simulation:
                 if snapshot.on_gl:
                     rgb, buffer = render_camera_underwater(
                         self.model,
-                        None,
                         scene,
                         self._geometry,
                         self.water.params,
@@ -528,7 +533,6 @@ class Simulation:
                 else:
                     rgb, buffer = render_camera(
                         self.model,
-                        None,
                         scene,
                         cam.height,
                         cam.width,

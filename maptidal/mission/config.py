@@ -50,6 +50,13 @@ MISSION_KEYS = {
     "perception_process",
     "water_backend",
 }
+# the [mission] keys that are not plain numbers, and what they must be
+SETTING_TYPES: dict[str, type] = {
+    "pose_source": str,
+    "water_backend": str,
+    "render_samples": int,
+    "perception_process": bool,
+}
 EVENT_KEYS = {"time_s", "kind", "robot", "current", "duration_s", "robots"}
 
 
@@ -64,21 +71,14 @@ def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
     if not isinstance(table, dict) or set(table) - MISSION_KEYS:
         raise ValueError(f"{path}: [mission] takes only {', '.join(sorted(MISSION_KEYS))}")
     settings = {key: value for key, value in table.items() if key != "events"}
+    kinds = {str: "a string", int: "a whole number", bool: "true or false"}
     for key, value in settings.items():
-        if key == "perception_process":
-            if not isinstance(value, bool):
-                raise ValueError(f"{path}: [mission] {key} must be true or false, got {value!r}")
-            continue
-        wanted = (
-            str
-            if key in ("pose_source", "water_backend")
-            else int
-            if key == "render_samples"
-            else (int, float)
-        )
-        if not isinstance(value, wanted) or isinstance(value, bool):
-            kind = "a string" if wanted is str else "a whole number" if wanted is int else "a number"
-            raise ValueError(f"{path}: [mission] {key} must be {kind}, got {value!r}")
+        wanted = SETTING_TYPES.get(key)
+        # TOML's true and false are Python bools, which are ints too: only a bool setting takes them
+        if (wanted is bool) != isinstance(value, bool) or not isinstance(value, wanted or (int, float)):
+            raise ValueError(
+                f"{path}: [mission] {key} must be {kinds.get(wanted, 'a number')}, got {value!r}"
+            )
     events = []
     for number, entry in enumerate(table.get("events", [])):
         if (

@@ -43,7 +43,7 @@ from controllers.pose import PoseController
 from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, Route
 from envs.rendering import check_render_samples, describe_renderer
 from envs.scenario import Scenario, inside_tank, load_scenario
-from envs.simulation import WATER_BACKENDS, Simulation
+from envs.simulation import Simulation, check_water_backend
 from envs.world import camera_offsets
 from maptidal.allocation.agent import AgentParams
 from maptidal.allocation.auction import AuctionEvent, AuctionSimulation
@@ -179,8 +179,7 @@ class MissionParams:
         if not (math.isfinite(self.clearance_m) and self.clearance_m >= 0):
             raise ValueError(f"clearance_m must be finite and >= 0, got {self.clearance_m!r}")
         check_render_samples(self.render_samples)
-        if self.water_backend not in WATER_BACKENDS:
-            raise ValueError(f"water_backend must be one of {WATER_BACKENDS}, got {self.water_backend!r}")
+        check_water_backend(self.water_backend)
         if self.video and not (
             min(self.video_size) >= 16 and self.video_frames_per_sim_s > 0 and self.video_playback_fps > 0
         ):
@@ -612,9 +611,8 @@ class Mission:
 
     def _make_renderer(self) -> str:
         # on the GL thread: the renderer's context is made, and stays current, there
-        height, width = self.params.image_size[1], self.params.image_size[0]
         self.sim.water_backend  # noqa: B018 - makes the renderer now, not in the first frame's time
-        return describe_renderer(self.sim.model, height, width)
+        return describe_renderer(self.sim.model, self.sim.camera.height, self.sim.camera.width)
 
     def _render(self, robot: str) -> tuple[np.ndarray, np.ndarray]:
         """The robot's stereo pair now, drawn on the GL thread (the loop waits for it)."""
