@@ -114,16 +114,56 @@ def _release_all() -> None:
             _close(_renderers.pop(key))
 
 
+def geoms_behind_camera(model: mujoco.MjModel, camera: str) -> np.ndarray:
+    """Ids of the visual geoms on ``camera``'s own body that lie wholly behind its near clipping plane:
+    every corner of each geom's bounding box is nearer the camera's plane than ``znear``, or behind it.
+    OpenGL clips them from every image that camera takes, so leaving them out of its scene changes no
+    pixel and spares drawing them (a BlueROV2's frame, thrusters and floats are behind its cameras)."""
+    cam = model.camera(camera).id
+    body = model.cam_bodyid[cam]
+    to_camera = np.zeros(9)
+    mujoco.mju_quat2Mat(to_camera, model.cam_quat[cam])
+    to_camera = to_camera.reshape(3, 3)
+    near = model.vis.map.znear * model.stat.extent
+    signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+    hidden = []
+    for geom in np.flatnonzero((model.geom_bodyid == body) & (model.geom_group < 3)):
+        to_body = np.zeros(9)
+        mujoco.mju_quat2Mat(to_body, model.geom_quat[geom])
+        centre, half = model.geom_aabb[geom, :3], model.geom_aabb[geom, 3:]
+        corners = model.geom_pos[geom] + (centre + signs * half) @ to_body.reshape(3, 3).T
+        depth = -((corners - model.cam_pos[cam]) @ to_camera)[:, 2]  # MuJoCo's cameras look along -z
+        if depth.max() < near:
+            hidden.append(int(geom))
+    return np.array(hidden, dtype=int)
+
+
 def update_camera_scene(
-    model: mujoco.MjModel, data: mujoco.MjData, camera: str, scene: mujoco.MjvScene
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    camera: str,
+    scene: mujoco.MjvScene,
+    hidden: np.ndarray | None = None,
 ) -> mujoco.MjvScene:
     """Fill ``scene`` with what the model camera ``camera`` sees in ``data`` now (the camera's scene
     options). The scene is a snapshot: drawing it later, even on another thread while the physics steps
-    on, draws this moment."""
+    on, draws this moment.
+
+    ``hidden`` geoms (:func:`geoms_behind_camera`) are left out: MuJoCo skips a geom whose colour has
+    zero alpha, so their alphas are zero for this call only. Update scenes of one model on one thread."""
     view = mujoco.MjvCamera()
     view.type = mujoco.mjtCamera.mjCAMERA_FIXED
     view.fixedcamid = model.camera(camera).id
-    mujoco.mjv_updateScene(model, data, CAMERA_SCENE_OPTION, None, view, mujoco.mjtCatBit.mjCAT_ALL, scene)
+    everything = mujoco.mjtCatBit.mjCAT_ALL
+    if hidden is None or not len(hidden):
+        mujoco.mjv_updateScene(model, data, CAMERA_SCENE_OPTION, None, view, everything, scene)
+        return scene
+    alphas = model.geom_rgba[hidden, 3].copy()
+    model.geom_rgba[hidden, 3] = 0.0
+    try:
+        mujoco.mjv_updateScene(model, data, CAMERA_SCENE_OPTION, None, view, everything, scene)
+    finally:
+        model.geom_rgba[hidden, 3] = alphas
     return scene
 
 

@@ -47,6 +47,7 @@ from envs.gl_water import CameraGeometry
 from envs.rendering import (
     check_render_samples,
     depth_coefficients,
+    geoms_behind_camera,
     gl_water_available,
     release,
     render_camera,
@@ -188,6 +189,8 @@ class Simulation:
         self._readings: dict[str, dict] = {}
         # scenes for stereo snapshots, reused: allocating one costs about 20 ms
         self._free_scenes: queue.SimpleQueue[mujoco.MjvScene] = queue.SimpleQueue()
+        # each camera's own-body geoms behind its near plane, left out of its scenes (no pixel changes)
+        self._hidden_geoms: dict[str, np.ndarray] = {}
         self.reset()
 
     def close(self) -> None:
@@ -499,7 +502,11 @@ class Simulation:
                 scene = self._free_scenes.get_nowait()
             except queue.Empty:
                 scene = mujoco.MjvScene(self.model, maxgeom=SNAPSHOT_MAX_GEOM)
-            scenes.append(update_camera_scene(self.model, self.data, f"{robot}/{side}", scene))
+            camera = f"{robot}/{side}"
+            hidden = self._hidden_geoms.get(camera)
+            if hidden is None:
+                hidden = self._hidden_geoms[camera] = geoms_behind_camera(self.model, camera)
+            scenes.append(update_camera_scene(self.model, self.data, camera, scene, hidden))
             if on_gl:
                 noisy = self.water.params.noise_sigma > 0
                 seeds.append(int(self.rng.integers(1 << 32)) if noisy else 0)

@@ -64,6 +64,8 @@ _QUERY_SLACK = 1.0 + 1e-9
 
 # Rebuild the neighbour grid once 1/_REBUILD_FRACTION of its points are blocked.
 _REBUILD_FRACTION = 2
+# Candidate-other pairs tested at once when pruning against a fixed set (bounds the memory).
+_PAIR_BLOCK = 262_144
 
 _MODE_NAMES = {0: "existing", 1: "final", 2: "self"}
 
@@ -327,22 +329,32 @@ def _blocked_by(
     """Mark candidates excluded by any row of ``others`` (a fixed set, e.g. existing tasks).
 
     Also says whether any candidate-other pair is within ``r_ex`` at all, which is
-    Algorithm 2's "precheck".
+    Algorithm 2's "precheck". Every candidate-other pair is tested at once, a block of
+    others at a time, after dropping the others too far from every candidate to matter.
     """
     blocked = np.zeros(len(candidates), dtype=bool)
+    positions = candidates[:, :3]
+    reach = r_ex * _QUERY_SLACK
+    low, high = positions.min(axis=0) - reach, positions.max(axis=0) + reach
+    others = others[np.all((others[:, :3] >= low) & (others[:, :3] <= high), axis=1)]
+    if len(others) == 0:
+        return blocked, False
     any_within = False
-    grid = SpatialGrid(candidates[:, :3], r_ex * _QUERY_SLACK)
-    for other in others:
-        near, columns = grid.near(other[:3])
-        if len(near) == 0:
-            continue
-        # Candidate minus task, summed left to right as in the literal distance.
-        dx, dy, dz = columns[0] - other[0], columns[1] - other[1], columns[2] - other[2]
+    cx, cy, cz = positions[:, 0, None], positions[:, 1, None], positions[:, 2, None]
+    block = max(1, _PAIR_BLOCK // len(candidates))
+    for start in range(0, len(others), block):
+        rows = others[start : start + block]
+        # candidate minus task, summed left to right as in the literal distance
+        dx, dy, dz = cx - rows[:, 0], cy - rows[:, 1], cz - rows[:, 2]
         within = np.sqrt(dx * dx + dy * dy + dz * dz) < r_ex
-        if within.any():
-            any_within = True
-            near = near[within]
-            blocked[near[view_angles(other[3:], candidates[near, 3:]) < theta_ex]] = True
+        if not within.any():
+            continue
+        any_within = True
+        candidate, other = np.nonzero(within)
+        near, far = candidates[candidate], rows[other]
+        # the literal dot product, left to right, then its clipped arccos
+        dots = near[:, 3] * far[:, 3] + near[:, 4] * far[:, 4] + near[:, 5] * far[:, 5]
+        blocked[candidate[np.arccos(np.clip(dots, -1.0, 1.0)) < theta_ex]] = True
     return blocked, any_within
 
 

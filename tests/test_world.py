@@ -414,3 +414,58 @@ def test_prefer_gl_takes_the_shader_where_it_runs_and_the_cpu_model_elsewhere(mo
     else:
         with pytest.raises(RuntimeError, match="cannot run"):
             insisting.water_backend  # noqa: B018
+
+
+def test_a_cameras_own_frame_is_left_out_of_its_scene_and_no_pixel_changes():
+    # the BlueROV2's frame, floats and thrusters lie behind its cameras' near plane: leaving them out of
+    # the scene spares drawing them, and must change no pixel of any image, whatever the attitude
+    sim = Simulation()
+    sim.reset(seed=0)
+    model, data = sim.model, sim.data
+    width, height = sim.camera.width, sim.camera.height
+    rng = np.random.default_rng(1)
+    scene = mujoco.MjvScene(model, 10000)
+    colours = model.geom_rgba.copy()
+    for trial in range(16):
+        robot = sim.robots[trial % len(sim.robots)]
+        axis = rng.normal(size=3)
+        tilt = np.r_[math.cos(0.4), math.sin(0.4) * axis / np.linalg.norm(axis)]
+        yaw = rng.uniform(-math.pi, math.pi)
+        attitude = np.zeros(4)
+        mujoco.mju_mulQuat(attitude, np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]), tilt)
+        position = [rng.uniform(-4.5, -0.5), rng.uniform(-1.0, 1.0), rng.uniform(0.4, 1.6)]
+        sim.place(robot, position, quaternion=attitude)
+        mujoco.mj_forward(model, data)
+        for side in ("left", "right"):
+            camera = f"{robot}/{side}"
+            hidden = rendering.geoms_behind_camera(model, camera)
+            own = (model.geom_bodyid == model.cam_bodyid[model.camera(camera).id]) & (model.geom_group < 3)
+            assert set(hidden) == set(np.flatnonzero(own))  # the whole visible frame
+            everything, _ = rendering.render_camera(
+                model, rendering.update_camera_scene(model, data, camera, scene), height, width, False
+            )
+            drawn = scene.ngeom
+            without, _ = rendering.render_camera(
+                model, rendering.update_camera_scene(model, data, camera, scene, hidden), height, width, False
+            )
+            assert scene.ngeom == drawn - len(hidden)
+            np.testing.assert_array_equal(without, everything)
+    np.testing.assert_array_equal(model.geom_rgba, colours)  # the colours are as they were
+    sim.close()
+
+
+def test_only_geoms_wholly_behind_the_near_plane_count_as_behind_the_camera():
+    spec = mujoco.MjSpec()
+    body = spec.worldbody.add_body(name="rig", pos=[0, 0, 1])
+    # MuJoCo's cameras look along -z: with this orientation the camera looks along +x
+    body.add_camera(name="eye", pos=[0, 0, 0], xyaxes=[0, -1, 0, 0, 0, 1])
+    boxes = {"behind": -0.1, "straddling": 0.0, "ahead": 0.1}
+    for name, x in boxes.items():
+        body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.03, 0.03, 0.03], pos=[x, 0, 0])
+    body.add_geom(
+        name="hidden-group", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.03] * 3, pos=[-0.1, 0, 0], group=3
+    )
+    spec.worldbody.add_geom(name="elsewhere", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.03] * 3, pos=[-1, 0, 1])
+    model = spec.compile()
+    names = {model.geom(int(g)).name for g in rendering.geoms_behind_camera(model, "eye")}
+    assert names == {"behind"}

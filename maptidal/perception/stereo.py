@@ -6,7 +6,8 @@ simulator, so it runs unchanged on real OAK-D recordings.
   cells (bucketing: each cell keeps its strongest responses), capped at ``max_keypoints``.
 - **Matching**: the pair is rectified, so a left keypoint's match lies on the same row of the right
   image, ``disparity`` pixels to the left. For each keypoint a ``patch x patch`` window is compared by
-  the sum of squared differences (``cv2.matchTemplate``, TM_SQDIFF) at every disparity in the range;
+  the sum of squared differences (TM_SQDIFF, exact in integers, every keypoint at once) at every
+  disparity in the range;
   the best must beat the second best outside its neighbours by the ``ratio``; a left-right check
   matches the right window back along the row and must land within ``lr_tolerance_px`` of the
   keypoint; a parabola through the costs at the best disparity and its neighbours gives the sub-pixel
@@ -106,16 +107,37 @@ def detect_keypoints(image: np.ndarray, params: StereoParams | None = None) -> n
     return points[np.array(sorted(kept), int)] if kept else np.zeros((0, 2))
 
 
-def _costs_along(template: np.ndarray, strip: np.ndarray) -> np.ndarray:
-    """Sum of squared differences of ``template`` at every column offset of ``strip`` (same height)."""
-    return cv2.matchTemplate(strip, template, cv2.TM_SQDIFF)[0]
+def _row_windows(padded: np.ndarray, pad: int, rows: np.ndarray, starts: np.ndarray, half: int, count: int):
+    """``(N, patch, count + 2 half)`` strips of an image padded by ``pad`` columns on each side: for
+    keypoint n, the patch's rows around ``rows[n]`` and the columns from ``starts[n] - half`` on."""
+    patch = 2 * half + 1
+    windows = np.lib.stride_tricks.sliding_window_view(padded, (patch, count + 2 * half))
+    return windows[rows - half, starts - half + pad]
+
+
+def _ssd_along(templates: np.ndarray, strips: np.ndarray) -> np.ndarray:
+    """``(N, K)`` sums of squared differences of each ``(patch, patch)`` template at the K column
+    offsets of its strip. Exact: the terms are whole numbers and every partial sum stays below 2^24
+    (81 x 255^2 for a 9 px patch), so float32 adds them without rounding."""
+    patch = templates.shape[2]
+    count = strips.shape[2] - patch + 1
+    templates, strips = templates.astype(np.float32), strips.astype(np.float32)
+    costs = np.zeros((len(strips), count), np.float32)
+    for column in range(patch):  # one template column against every offset at once
+        difference = strips[:, :, column : column + count] - templates[:, :, column : column + 1]
+        costs += np.einsum("nrk,nrk->nk", difference, difference)
+    return costs
 
 
 def match_stereo(
     left: np.ndarray, right: np.ndarray, keypoints: np.ndarray, params: StereoParams | None = None
 ) -> np.ndarray:
     """Sub-pixel disparity (px) of each left keypoint in the right image; NaN where the match is
-    ambiguous (ratio test), inconsistent (left-right check) or off the image."""
+    ambiguous (ratio test), inconsistent (left-right check) or off the image.
+
+    Every keypoint is matched at once: the costs at each disparity are exact integer sums of squared
+    differences, the same numbers as ``cv2.matchTemplate(..., TM_SQDIFF)`` per keypoint, which a test
+    checks against that literal loop."""
     params = params or StereoParams()
     left_gray, right_gray = gray_image(left, "left image"), gray_image(right, "right image")
     if left_gray.shape != right_gray.shape:
@@ -124,40 +146,61 @@ def match_stereo(
         )
     half = params.patch // 2
     height, width = left_gray.shape
-    left_f, right_f = left_gray.astype(np.float32), right_gray.astype(np.float32)
-    out = np.full(len(keypoints), np.nan)
-    for index, (u_f, v_f) in enumerate(np.asarray(keypoints, float).reshape(-1, 2)):
-        u, v = round(float(u_f)), round(float(v_f))
-        if not (half <= v < height - half and half <= u < width - half):
-            continue
-        rows = slice(v - half, v + half + 1)
-        template = left_f[rows, u - half : u + half + 1]
-        # candidate right positions x = u - d for d = min .. max (as far as the image goes)
-        x_low = max(half, u - params.max_disparity_px)
-        x_high = u - params.min_disparity_px
-        if x_high < x_low:
-            continue
-        costs = _costs_along(template, right_f[rows, x_low - half : x_high + half + 1])[::-1]  # d increasing
-        disparities = np.arange(params.min_disparity_px, params.min_disparity_px + len(costs))
-        best = int(np.argmin(costs))
-        others = np.concatenate([costs[: max(best - 1, 0)], costs[best + 2 :]])
-        if len(others) and not costs[best] < params.ratio * others.min():
-            continue  # ambiguous: not clearly better than the next candidate (ties included)
-        d = int(disparities[best])
-        # left-right check: the right window's best match back along the left row
-        x = u - d
-        back_high = min(width - 1 - half, x + params.max_disparity_px)
-        back_costs = _costs_along(
-            right_f[rows, x - half : x + half + 1], left_f[rows, x - half : back_high + half + 1]
-        )
-        if abs(int(np.argmin(back_costs)) - d) > params.lr_tolerance_px:
-            continue
-        offset = 0.0
-        if 0 < best < len(costs) - 1:
-            denominator = costs[best - 1] - 2 * costs[best] + costs[best + 1]
-            if denominator > 0:
-                offset = 0.5 * (costs[best - 1] - costs[best + 1]) / denominator
-        out[index] = d + float(np.clip(offset, -0.5, 0.5))
+    points = np.asarray(keypoints, float).reshape(-1, 2)
+    out = np.full(len(points), np.nan)
+    if not len(points):
+        return out
+    # Python's round (half to even), as the per-keypoint matcher did
+    u_all = np.rint(points[:, 0]).astype(int)
+    v_all = np.rint(points[:, 1]).astype(int)
+    lowest, highest = params.min_disparity_px, params.max_disparity_px
+    # a keypoint's disparities run from the minimum to as far as its window stays in the right image
+    top = np.minimum(highest, u_all - half)
+    usable = (
+        (half <= v_all) & (v_all < height - half) & (half <= u_all) & (u_all < width - half) & (top >= lowest)
+    )
+    index = np.flatnonzero(usable)
+    if not len(index):
+        return out
+    u, v, top = u_all[index], v_all[index], top[index]
+    count = highest - lowest + 1
+    pad = highest + params.patch  # every window lies inside the padded images
+    left_p, right_p = (
+        np.pad(image.astype(np.float32), ((0, 0), (pad, pad))) for image in (left_gray, right_gray)
+    )
+    templates = _row_windows(left_p, pad, v, u, half, 1)[:, :, : params.patch]
+    # candidate right positions x = u - d for d = highest .. lowest, left to right
+    costs = _ssd_along(templates, _row_windows(right_p, pad, v, u - highest, half, count)).astype(float)
+    costs = costs[:, ::-1]  # d increasing from the minimum
+    disparities = lowest + np.arange(count)
+    costs[disparities[None, :] > top[:, None]] = np.inf  # windows off the image's left edge
+    best = np.argmin(costs, axis=1)
+    rows = np.arange(len(index))
+    best_cost = costs[rows, best]
+    # the ratio test: better than every candidate outside the best's neighbours (ties are ambiguous)
+    near_best = np.abs(np.arange(count)[None, :] - best[:, None]) <= 1
+    others = np.where(near_best, np.inf, costs).min(axis=1)
+    clear = ~np.isfinite(others) | (best_cost < params.ratio * others)
+    d = disparities[best]
+    # left-right check: the right window's best match back along the left row
+    x = u - d
+    back_count = highest + 1
+    back = _ssd_along(
+        _row_windows(right_p, pad, v, x, half, 1)[:, :, : params.patch],
+        _row_windows(left_p, pad, v, x, half, back_count),
+    ).astype(float)
+    back_high = np.minimum(width - 1 - half, x + highest)
+    back[np.arange(back_count)[None, :] > (back_high - x)[:, None]] = np.inf
+    consistent = np.abs(np.argmin(back, axis=1) - d) <= params.lr_tolerance_px
+    # a parabola through the best cost and its neighbours
+    inner = (best > 0) & (best < top - lowest)
+    before = costs[rows, np.maximum(best - 1, 0)]
+    after = costs[rows, np.minimum(best + 1, count - 1)]
+    denominator = np.where(inner, before - 2 * best_cost + after, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        offset = np.where(denominator > 0, 0.5 * (before - after) / denominator, 0.0)
+    matched = clear & consistent
+    out[index[matched]] = d[matched] + np.clip(offset[matched], -0.5, 0.5)
     return out
 
 
