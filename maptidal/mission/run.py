@@ -641,7 +641,10 @@ class Mission:
         self.timing["rendering"] += time.perf_counter() - start
         base = "truth" if self.params.pose_source == "truth" else "dr"
         known = self.auction.agents[robot.index].tasks
-        existing = np.array([np.concatenate((t.position, t.direction)) for t in known]).reshape(-1, 6)
+        existing = np.zeros((len(known), 6))
+        if known:
+            existing[:, :3] = [t.position for t in known]
+            existing[:, 3:] = [t.direction for t in known]
         job = FrameJob(
             robot.name,
             now,

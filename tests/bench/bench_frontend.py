@@ -20,7 +20,7 @@ from envs.simulation import Simulation
 from maptidal.frame_discovery import discover_on_recording
 from maptidal.mission.capture import CaptureParams, capture, place_camera
 from maptidal.perception.frontend import FrontEndParams
-from maptidal.perception.stereo import DETECTORS, StereoParams
+from maptidal.perception.stereo import DETECTORS, StereoParams, detect_keypoints, match_stereo
 
 STAGES = (
     "detection",
@@ -66,6 +66,27 @@ def main() -> None:
                 print(
                     f"| {detector} | {source} | {n} | {cells} | {1000 * total:.1f} | {total / render:.2f} |"
                 )
+        matching_against_the_literal(recording)
+
+
+def matching_against_the_literal(recording) -> None:
+    """Row matching, every keypoint at once, against the literal per-keypoint matchTemplate loop it
+    replaced (tests/bench/literal_stereo.py), on the same frames and keypoints."""
+    from literal_stereo import literal_match_stereo
+
+    pairs = [recording.images(frame) for frame in recording.frames[:20]]
+    keypoints = [detect_keypoints(left) for left, _ in pairs]
+    timed = {}
+    for name, matcher in (("vectorised", match_stereo), ("literal", literal_match_stereo)):
+        start = time.perf_counter()
+        for (left, right), points in zip(pairs, keypoints, strict=True):
+            matcher(left, right, points)
+        timed[name] = (time.perf_counter() - start) / len(pairs)
+    count = sum(len(points) for points in keypoints) / len(pairs)
+    print(
+        f"\nrow matching, {count:.0f} keypoints a frame: {1000 * timed['vectorised']:.1f} ms, the literal "
+        f"per-keypoint loop {1000 * timed['literal']:.1f} ms ({timed['vectorised'] / timed['literal']:.2f}x)"
+    )
 
 
 if __name__ == "__main__":
