@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -162,6 +163,20 @@ def test_a_killed_mission_leaves_a_log_the_report_rebuilds(tmp_path):
     assert rebuilt["duplicate_inspections"] == len(done_events) - len(set(done_events))
     assert rebuilt["coverage"]["occluded"]["n_viewpoints"] >= 1
     assert (tmp_path / "report.md").is_file() and (tmp_path / "top_view.png").is_file()
+
+
+def test_a_rebuilt_report_names_only_the_images_on_disk(short_mission, tmp_path):
+    # a task's image is drawn and written on the GL thread just after its "done" event: a mission killed
+    # in between leaves an event whose image never reached the disk, and the rebuilt report says so
+    out = tmp_path / "mission"
+    shutil.copytree(short_mission[2], out)
+    done = [e for e in read_events(out) if e["kind"] == "done"]
+    assert len(done) >= 2
+    (out / done[0]["image"]).unlink()
+    assert run_maptidal("report", out).returncode == 0
+    images = {t["id"]: t["image"] for t in json.loads((out / "mission.json").read_text())["tasks"]}
+    assert images[done[0]["task"]] is None
+    assert all(images[e["task"]] == e["image"] and (out / e["image"]).is_file() for e in done[1:])
 
 
 def _alive(pid: int) -> bool:

@@ -55,6 +55,11 @@ class MissionWriter:
         if not ok:
             raise ValueError(f"could not encode {name}")
         atomic_write_bytes(self.root / "images" / name, encoded.tobytes())
+        return self.image_path(name)
+
+    @staticmethod
+    def image_path(name: str) -> str:
+        """Where :meth:`image` writes ``name``, relative to the output folder."""
         return f"images/{name}"
 
     def snapshot(self, document: dict) -> None:
@@ -335,10 +340,12 @@ def rebuild(root, tank) -> dict:
         elif kind == "flying" and event["task"] in tasks:
             tasks[event["task"]]["assigned_to"] = event["robot"]
         elif kind == "done" and event["task"] in tasks:
+            image = event.get("image")
+            # the image is written just after its event: a mission killed in between never wrote it
             tasks[event["task"]].update(
                 completed=True,
                 completion_time=event["t"],
-                image=event.get("image"),
+                image=image if image and (root / image).is_file() else None,
                 assigned_to=event["robot"],
             )
             if "view" in event:

@@ -365,6 +365,7 @@ class Mission:
         self._frames_render_s = 0.0  # the GL thread's time drawing the frames perception takes
         self._waited_s = 0.0  # the loop's time waiting for a frame's drawing and its answer
         self._frames: dict[str, Future] = {}  # each robot's frame being drawn and handed to perception
+        self._captures: list[Future] = []  # task images being drawn and written on the GL thread
         self.tasks: dict[int, dict] = {}  # key -> record (the mission's own ledger, for the outputs)
         self.timing = dict.fromkeys(
             ("physics", "rendering", "perception", "discovery", "allocation", "control"), 0.0
@@ -564,6 +565,7 @@ class Mission:
                 self.writer.trajectory(now, {r.name: self._poses(r) for r in self.robots.values()})
             if now >= next_snapshot:
                 next_snapshot += p.snapshot_every_s
+                self._settle_captures()
                 self.writer.snapshot(self.document(now, time.perf_counter() - wall_start, finished=False))
             if now >= next_check - 1e-9:  # once a second: the end, and the progress bar
                 next_check += 1.0
@@ -574,6 +576,7 @@ class Mission:
                     finished = True
                     break
         self.writer.event(now, "end", finished=finished)
+        self._settle_captures()
         if self.video is not None:
             self.video.close()
         document = self.document(now, time.perf_counter() - wall_start, finished=finished)
@@ -614,9 +617,19 @@ class Mission:
         self.sim.water_backend  # noqa: B018 - makes the renderer now, not in the first frame's time
         return describe_renderer(self.sim.model, self.sim.camera.height, self.sim.camera.width)
 
-    def _render(self, robot: str) -> tuple[np.ndarray, np.ndarray]:
-        """The robot's stereo pair now, drawn on the GL thread (the loop waits for it)."""
-        return self._gl.submit(self.sim.render_snapshot, self.sim.stereo_snapshot(robot)).result()
+    def _draw_capture(self, snapshot, name: str) -> None:
+        # on the GL thread: draw a task's image and write it (OpenCV lets go of Python's lock meanwhile)
+        left, _ = self.sim.render_snapshot(snapshot)
+        self.writer.image(name, left)
+
+    def _settle_captures(self) -> None:
+        """Wait until every task image asked for so far is on disk (before a mission.json names them);
+        an error drawing or writing one is raised here."""
+        start = time.perf_counter()
+        captures, self._captures = self._captures, []
+        for capture in captures:
+            capture.result()
+        self._waited_s += time.perf_counter() - start
 
     def _draw_frame(self, snapshot, job: FrameJob) -> np.ndarray:
         # on the GL thread: draw the frame's snapshot and hand the pair to perception
@@ -758,8 +771,10 @@ class Mission:
                 self.writer.event(now, "timeout", robot=robot.name, task=key)
 
     def _capture(self, robot: _Robot, key: int, now: float) -> None:
-        left, _ = self._render(robot.name)
-        image = self.writer.image(f"task_{key}_{robot.name}.png", left)
+        # the image of this moment, drawn and written on the GL thread while the physics steps on
+        name = f"task_{key}_{robot.name}.png"
+        self._captures.append(self._gl.submit(self._draw_capture, self.sim.stereo_snapshot(robot.name), name))
+        image = self.writer.image_path(name)
         truth = self._camera_pose(robot, "truth")
         self.captured.append(np.r_[truth.position, truth.forward])
         self.inspections[key] = self.inspections.get(key, 0) + 1
