@@ -117,12 +117,14 @@ def _row_windows(padded: np.ndarray, pad: int, rows: np.ndarray, starts: np.ndar
 
 def _ssd_along(templates: np.ndarray, strips: np.ndarray) -> np.ndarray:
     """``(N, K)`` sums of squared differences of each ``(patch, patch)`` template at the K column
-    offsets of its strip. Exact: the terms are whole numbers and every partial sum stays below 2^24
-    (81 x 255^2 for a 9 px patch), so float32 adds them without rounding."""
+    offsets of its strip. Exact: the terms are whole numbers, and float32 adds them without rounding
+    while every partial sum stays below 2^24 (patches up to 15 px: 225 x 255^2); larger patches are
+    summed in float64."""
     patch = templates.shape[2]
     count = strips.shape[2] - patch + 1
-    templates, strips = templates.astype(np.float32), strips.astype(np.float32)
-    costs = np.zeros((len(strips), count), np.float32)
+    exact = np.float32 if patch * patch * 255**2 < 2**24 else np.float64
+    templates, strips = templates.astype(exact), strips.astype(exact)
+    costs = np.zeros((len(strips), count), exact)
     for column in range(patch):  # one template column against every offset at once
         difference = strips[:, :, column : column + count] - templates[:, :, column : column + 1]
         costs += np.einsum("nrk,nrk->nk", difference, difference)
