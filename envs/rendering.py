@@ -114,11 +114,28 @@ def _release_all() -> None:
             _close(_renderers.pop(key))
 
 
+def has_mirrors(model: mujoco.MjModel) -> bool:
+    """Whether any opaque geom of ``model`` reflects (a material with reflectance above 0): MuJoCo draws
+    the scene mirrored in it, which can show what lies behind a camera. It draws no reflection in a
+    geom with any transparency, such as the tank's window pane (alpha 0.55): a test checks that a robot
+    facing the pane never sees its own frame in it, and that it does once the pane is opaque."""
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    scene = mujoco.MjvScene(model, maxgeom=max(1000, 2 * model.ngeom))
+    view = mujoco.MjvCamera()
+    view.type = mujoco.mjtCamera.mjCAMERA_FREE
+    mujoco.mjv_updateScene(model, data, CAMERA_SCENE_OPTION, None, view, mujoco.mjtCatBit.mjCAT_ALL, scene)
+    return any(scene.geoms[i].reflectance > 0 and scene.geoms[i].rgba[3] >= 1.0 for i in range(scene.ngeom))
+
+
 def geoms_behind_camera(model: mujoco.MjModel, camera: str) -> np.ndarray:
     """Ids of the visual geoms on ``camera``'s own body that lie wholly behind its near clipping plane:
     every corner of each geom's bounding box is nearer the camera's plane than ``znear``, or behind it.
     OpenGL clips them from every image that camera takes, so leaving them out of its scene changes no
-    pixel and spares drawing them (a BlueROV2's frame, thrusters and floats are behind its cameras)."""
+    pixel and spares drawing them (a BlueROV2's frame, thrusters and floats are behind its cameras).
+    None in a model with a mirror (:func:`has_mirrors`), where they could show in its reflection."""
+    if has_mirrors(model):
+        return np.zeros(0, dtype=int)
     cam = model.camera(camera).id
     body = model.cam_bodyid[cam]
     to_camera = np.zeros(9)

@@ -469,3 +469,38 @@ def test_only_geoms_wholly_behind_the_near_plane_count_as_behind_the_camera():
     model = spec.compile()
     names = {model.geom(int(g)).name for g in rendering.geoms_behind_camera(model, "eye")}
     assert names == {"behind"}
+
+
+def test_a_mirror_shows_a_cameras_own_frame_so_nothing_is_left_out_then():
+    # MuJoCo draws the scene mirrored in an opaque reflective geom, and there a robot facing it sees its
+    # own frame; in the tank's transparent window pane it draws no reflection at all
+    two = load_scenario(None)
+    sim = Simulation(two)
+    sim.reset(seed=0)
+    model, data = sim.model, sim.data
+    width, height = sim.camera.width, sim.camera.height
+    centre = np.mean(two.tank.window_rim(), axis=0)
+    sim.place("rov0", centre + np.array([-0.6, 0.0, 0.0]), 0.0)  # 0.6 m from the pane, facing it
+    mujoco.mj_forward(model, data)
+    camera, scene = "rov0/left", mujoco.MjvScene(model, 10000)
+    own = np.flatnonzero(
+        (model.geom_bodyid == model.cam_bodyid[model.camera(camera).id]) & (model.geom_group < 3)
+    )
+
+    def images_with_and_without_the_frame():
+        drawn = rendering.update_camera_scene(model, data, camera, scene)
+        everything, _ = rendering.render_camera(model, drawn, height, width, False)
+        left_out = rendering.update_camera_scene(model, data, camera, scene, own)
+        without, _ = rendering.render_camera(model, left_out, height, width, False)
+        return everything, without
+
+    assert not rendering.has_mirrors(model)
+    assert set(rendering.geoms_behind_camera(model, camera)) == set(own)
+    everything, without = images_with_and_without_the_frame()
+    np.testing.assert_array_equal(without, everything)
+    model.mat_rgba[model.material("glass").id, 3] = 1.0  # an opaque pane: a mirror
+    assert rendering.has_mirrors(model)
+    assert len(rendering.geoms_behind_camera(model, camera)) == 0
+    everything, without = images_with_and_without_the_frame()
+    assert (np.abs(everything.astype(int) - without.astype(int)).max(axis=2) > 0).sum() > 1000
+    sim.close()
