@@ -10,6 +10,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -177,6 +178,44 @@ def test_a_rebuilt_report_names_only_the_images_on_disk(short_mission, tmp_path)
     images = {t["id"]: t["image"] for t in json.loads((out / "mission.json").read_text())["tasks"]}
     assert images[done[0]["task"]] is None
     assert all(images[e["task"]] == e["image"] and (out / e["image"]).is_file() for e in done[1:])
+
+
+@pytest.mark.parametrize("write", ["snapshot", "final"])
+def test_mission_json_waits_for_the_task_images_it_names(monkeypatch, tmp_path, write):
+    # a task's image is drawn and written on the GL thread after its "done": hold one back, and neither
+    # the periodic mission.json nor the final one may be written before it is on disk
+    from maptidal.mission.outputs import MissionWriter
+
+    scenario, _ = load_mission(None)
+    mission = Mission(scenario, MissionParams(duration_s=1.0, seed=3), tmp_path)
+    image = tmp_path / "images" / "held_back.png"
+    release = threading.Event()
+
+    def late_image():
+        release.wait(10)
+        image.write_bytes(b"png")
+
+    mission._captures.append(mission._gl.submit(late_image))
+    threading.Timer(0.3, release.set).start()
+    written = []
+    for method in ("snapshot", "finish"):
+        original = getattr(MissionWriter, method)
+
+        def checked(self, document, *rest, _original=original):
+            written.append(image.is_file())
+            return _original(self, document, *rest)
+
+        monkeypatch.setattr(MissionWriter, method, checked)
+    try:
+        if write == "snapshot":
+            mission._write_snapshot(0.0, 1.0)
+        else:
+            mission._write_final(0.0, time.perf_counter(), finished=False)
+    finally:
+        mission.perception.close()
+        mission._gl.submit(mission.sim.close).result()
+        mission._gl.shutdown()
+    assert written == [True]
 
 
 def _alive(pid: int) -> bool:

@@ -146,7 +146,8 @@ def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: t
     axis.set_xlabel("x (m)")
     axis.set_ylabel("y (m)")
     axis.set_title("Paths, tasks by robot (faint: not done), acoustic links (dashed)")
-    axis.legend(fontsize=7, loc="lower left")
+    if axis.get_legend_handles_labels()[0]:  # a mission cut short may have no path drawn yet
+        axis.legend(fontsize=7, loc="lower left")
     figure.tight_layout()
     figure.savefig(root / "top_view.png", dpi=110)
     plt.close(figure)

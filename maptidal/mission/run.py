@@ -565,8 +565,7 @@ class Mission:
                 self.writer.trajectory(now, {r.name: self._poses(r) for r in self.robots.values()})
             if now >= next_snapshot:
                 next_snapshot += p.snapshot_every_s
-                self._settle_captures()
-                self.writer.snapshot(self.document(now, time.perf_counter() - wall_start, finished=False))
+                self._write_snapshot(now, time.perf_counter() - wall_start)
             if now >= next_check - 1e-9:  # once a second: the end, and the progress bar
                 next_check += 1.0
                 if progress is not None:
@@ -576,6 +575,15 @@ class Mission:
                     finished = True
                     break
         self.writer.event(now, "end", finished=finished)
+        return self._write_final(now, wall_start, finished)
+
+    def _write_snapshot(self, now: float, wall_s: float) -> None:
+        """Replace ``mission.json`` with the mission as of now, once the task images it names are on disk."""
+        self._settle_captures()
+        self.writer.snapshot(self.document(now, wall_s, finished=False))
+
+    def _write_final(self, now: float, wall_start: float, finished: bool) -> dict:
+        """The final ``mission.json``, plots and report, once every task image is on disk."""
         self._settle_captures()
         if self.video is not None:
             self.video.close()
