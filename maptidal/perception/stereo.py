@@ -123,7 +123,7 @@ def _ssd_along(templates: np.ndarray, strips: np.ndarray) -> np.ndarray:
     patch = templates.shape[2]
     count = strips.shape[2] - patch + 1
     exact = np.float32 if patch * patch * 255**2 < 2**24 else np.float64
-    templates, strips = templates.astype(exact), strips.astype(exact)
+    templates, strips = templates.astype(exact, copy=False), strips.astype(exact, copy=False)
     costs = np.zeros((len(strips), count), exact)
     for column in range(patch):  # one template column against every offset at once
         difference = strips[:, :, column : column + count] - templates[:, :, column : column + 1]
@@ -170,7 +170,7 @@ def match_stereo(
     left_p, right_p = (
         np.pad(image.astype(np.float32), ((0, 0), (pad, pad))) for image in (left_gray, right_gray)
     )
-    templates = _row_windows(left_p, pad, v, u, half, 1)[:, :, : params.patch]
+    templates = _row_windows(left_p, pad, v, u, half, 1)  # count 1: the patch itself
     # candidate right positions x = u - d for d = highest .. lowest, left to right
     costs = _ssd_along(templates, _row_windows(right_p, pad, v, u - highest, half, count)).astype(float)
     costs = costs[:, ::-1]  # d increasing from the minimum
@@ -188,7 +188,7 @@ def match_stereo(
     x = u - d
     back_count = highest + 1
     back = _ssd_along(
-        _row_windows(right_p, pad, v, x, half, 1)[:, :, : params.patch],
+        _row_windows(right_p, pad, v, x, half, 1),
         _row_windows(left_p, pad, v, x, half, back_count),
     ).astype(float)
     back_high = np.minimum(width - 1 - half, x + highest)
