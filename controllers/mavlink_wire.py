@@ -77,14 +77,21 @@ def encode_pilot(command) -> tuple[dict[str, int], list[int]]:
 def decode_manual_control(x: float, y: float, z: float, r: float) -> np.ndarray:
     """MANUAL_CONTROL's fields as surge, sway, heave, yaw in [-1, 1] (ArduSub's scaling).
 
-    Raises :class:`WireError` for values outside their ranges, so a corrupt packet never moves a
-    thruster."""
+    Values outside their ranges are clamped, as ArduSub clamps the RC overrides it makes of them
+    (``constrain_int16(..., 1100, 1900)`` in ``transform_manual_control_to_rc_override``): x = 5000 is
+    full forward. Non-finite values raise :class:`WireError`, so a corrupt packet never moves a
+    thruster (MAVLink's int16 fields cannot carry them; a decoder fed by other means can)."""
     values = (float(x), float(y), float(z), float(r))
     if not all(math.isfinite(v) for v in values):
         raise WireError(f"MANUAL_CONTROL fields must be finite, got {values}")
-    if not (all(-1000 <= v <= 1000 for v in (values[0], values[1], values[3])) and 0 <= values[2] <= 1000):
-        raise WireError(f"MANUAL_CONTROL out of range (x, y, r in [-1000, 1000], z in [0, 1000]): {values}")
-    return np.array([values[0] / 1000, values[1] / 1000, (values[2] - 500) / 500, values[3] / 1000])
+    surge, sway, yaw = (max(-1000.0, min(1000.0, v)) / 1000 for v in (values[0], values[1], values[3]))
+    heave = (max(0.0, min(1000.0, values[2])) - 500) / 500
+    return np.array([surge, sway, heave, yaw])
+
+
+def manual_control_in_range(x: float, y: float, z: float, r: float) -> bool:
+    """Whether MANUAL_CONTROL's fields lie in their ranges (x, y, r in [-1000, 1000], z in [0, 1000])."""
+    return all(-1000 <= v <= 1000 for v in (x, y, r)) and 0 <= z <= 1000
 
 
 def decode_rc_channel(pulse_us: int) -> float | None:

@@ -8,9 +8,9 @@ Control, 2011, with diagonal added mass and damping)::
 
 - ``C_A(nu_r) nu_r`` (the added-mass Coriolis terms, the Munk moment among them) is
   implemented in full and switched per vehicle (``added_mass_coriolis``): on for the
-  Heavy, off for the standard frame (assets/bluerov2/README.md). With the published
-  coefficients the linearised pitch equation is unstable above about 0.48 m/s, so full
-  surge in MANUAL pitches the Heavy over; STABILIZE holds it level;
+  Heavy, off for the standard frame (assets/bluerov2/README.md). With von Benzon's CB
+  1 cm above the CG the Heavy's linearised pitch equation is unstable above about 0.48 m/s;
+  with the 4.9 cm we use it leans under 20 deg at full surge in MANUAL; STABILIZE holds it level;
 - ``nu_r = nu - [R^T v_current; 0]``: damping, added mass and C_A act on the velocity
   relative to an irrotational, constant water current, whose body-frame rate of change
   ``-w x (R^T v_current)`` is part of ``nudot_r``;

@@ -47,6 +47,7 @@ from controllers.mavlink_wire import (
     decode_manual_control,
     decode_rc_channel,
     flu_from_frd,
+    manual_control_in_range,
     ned_from_world,
     rpy_to_ned,
     world_from_ned,
@@ -150,6 +151,7 @@ class VehicleCounters:
     rejected_signatures: int = 0
     ignored_senders: int = 0
     bad_pilot_messages: int = 0
+    clamped_pilot_messages: int = 0  # MANUAL_CONTROL out of range, clamped as ArduSub clamps it
     unsupported_commands: int = 0
     pilot_failsafes: int = 0
     parameters_sent: int = 0
@@ -311,6 +313,8 @@ class SimVehicle:
         except WireError:
             self.counters.bad_pilot_messages += 1
             return
+        if not manual_control_in_range(m.x, m.y, m.z, m.r):
+            self.counters.clamped_pilot_messages += 1
         self.pilot[[0, 1, 2, 5]] = [surge, sway, heave, yaw]
         self._last_pilot_s = self.sim.time
         if self.pilot_failsafe:

@@ -316,16 +316,16 @@ def test_malformed_packets_are_counted_and_dropped():
         sock.close()
         gcs = raw_gcs(served.port)
         # junk can claim a long payload and swallow what follows while the parser resynchronises, as on
-        # any noisy link: a few heartbeats first, then MANUAL_CONTROL with x out of range (refused, not
-        # clipped)
+        # any noisy link: a few heartbeats first, then MANUAL_CONTROL with x out of range, which ArduSub
+        # clamps to full forward (counted)
         for _ in range(30):
             gcs.mav.heartbeat_send(6, 8, 0, 0, 0)
         for _ in range(3):
             gcs.mav.manual_control_send(1, 5000, 0, 500, 0, 0)
             time.sleep(0.05)
         assert wait_until(lambda: served.vehicle.counters.bad_packets >= 1)
-        assert wait_until(lambda: served.vehicle.counters.bad_pilot_messages >= 1)
-        assert served.thread.is_alive() and served.vehicle.pilot[0] == 0
+        assert wait_until(lambda: served.vehicle.counters.clamped_pilot_messages >= 1)
+        assert served.thread.is_alive() and served.vehicle.pilot[0] == 1.0
         gcs.close()
 
 

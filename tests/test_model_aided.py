@@ -74,13 +74,13 @@ def _readings(heading_deg: float, dvl_velocity=None, thrust=None) -> dict:
     return readings
 
 
-def _estimator(model: MotionModel | None) -> DeadReckoning:
-    return DeadReckoning(EstimatorParams(5.0, motion_model=model), (0.0, 0.0, 4.0), 0.0)
+def _estimator(model: MotionModel | None, start_yaw: float = 0.0) -> DeadReckoning:
+    return DeadReckoning(EstimatorParams(5.0, motion_model=model), (0.0, 0.0, 4.0), start_yaw)
 
 
 def test_without_a_dvl_a_forward_thrust_moves_the_estimate_along_the_heading():
-    estimator = _estimator(_model(quadratic=0.0))
     # heading 270 deg clockwise from north is yaw +90 deg: body forward is world +y
+    estimator = _estimator(_model(quadratic=0.0), start_yaw=math.pi / 2)
     for _ in range(500):
         state = estimator.update(_readings(270.0, thrust=(10.0, 0.0, 0.0)), 0.02)
     assert state.position[1] > 1.0 and abs(state.position[0]) < 1e-6 * state.position[1]
@@ -160,7 +160,7 @@ def test_the_gate_drops_a_visual_step_far_from_the_dead_reckoned_one():
 def test_a_rolled_vehicle_rises_straight_up_under_its_buoyancy():
     roll = 0.5
     estimator = _estimator(_model(quadratic=0.0, buoyancy=5.0))
-    estimator.state.rpy[:] = (roll, 0.0, 0.0)
+    estimator.set_attitude(roll, 0.0, 0.0)
     readings = _readings(0.0, thrust=(0.0, 0.0, 0.0))
     readings["imu"]["accel"] = [0.0, 9.81 * math.sin(roll), 9.81 * math.cos(roll)]  # at rest, rolled
     for _ in range(500):

@@ -88,8 +88,9 @@ def terminal_speed(d_l: float, d_q: float, force: float) -> float:
 @pytest.mark.parametrize("frame", ["heavy", "standard"])
 @pytest.mark.parametrize(("command", "axis"), [({"surge": 1.0}, 0), ({"sway": -1.0}, 1), ({"heave": 1.0}, 2)])
 def test_terminal_speeds_are_the_closed_form_balance_of_thrust_and_drag(frame, command, axis):
-    """C_A off: in MANUAL the Munk moment pitches the vehicles over at these speeds (test_fossen.py);
-    this is the damping balance alone. The standard frame's full surge is Blue Robotics' ~1.5 m/s."""
+    """C_A off: the Munk moment would lean the Heavy and tumble the standard frame at these speeds
+    (test_fossen.py); this is the damping balance alone. The standard frame's full surge is Blue
+    Robotics' ~1.5 m/s."""
     sim = open_water(frame, added_mass_coriolis=False)
     _, velocities, _ = run(sim, command, 8.0)
     d_l, d_q = DAMPING[frame][axis]

@@ -22,9 +22,9 @@ class GoToPoseEnv(PoseTargetEnv):
     | 0 | surge | full forward |
     | 1 | sway | full right |
     | 2 | heave | full up |
-    | 3 | roll | lean right (STABILIZE: 30 deg) |
-    | 4 | pitch | nose up (STABILIZE: 30 deg) |
-    | 5 | yaw | turn right (STABILIZE: 90 deg/s) |
+    | 3 | roll | lean right (STABILIZE: 45 deg, ANGLE_MAX) |
+    | 4 | pitch | nose up (STABILIZE: 45 deg, ANGLE_MAX) |
+    | 5 | yaw | turn right (STABILIZE: 151.9 deg/s, ACRO_YAW_P x 45 deg) |
 
     ``action="thrusters"``: ``Box(-1, 1, (n,))``, one command per thruster (8 on the Heavy, 6 on the
     standard frame), in ArduSub's motor order, straight to the thrusters (MANUAL).

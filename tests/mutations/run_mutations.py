@@ -1,8 +1,9 @@
-"""Re-run the physics mutation list of tests/README.md: apply each mutation to the source, run the physics
-tests, record which test fails first, and restore the file. Every mutation must be killed.
+"""Re-run the mutation lists of tests/README.md (M: physics, F: flight modes and estimator): apply each
+mutation to the source, run its group's tests, record which test fails first, and restore the file.
+Every mutation must be killed.
 
     python tests/mutations/run_mutations.py            # all
-    python tests/mutations/run_mutations.py M3 M7      # some
+    python tests/mutations/run_mutations.py M3 F7      # some
 
 It edits files in place and restores them from memory afterwards (also on Ctrl-C); run it on a clean
 tree.
@@ -21,6 +22,14 @@ TESTS = [
     "tests/test_controllers.py",
     "tests/test_thrusters.py",
 ]
+
+FLIGHT_TESTS = [
+    "tests/test_estimation.py",
+    "tests/test_ardusub_loops.py",
+    "tests/test_feedback.py",
+    "tests/test_model_aided.py",
+]
+TESTS_OF_GROUP = {"M": TESTS, "F": FLIGHT_TESTS}
 
 # id: (description, [(file, old, new), ...])
 MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
@@ -147,6 +156,138 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             )
         ],
     ),
+    "F1": (
+        "integrate the gyro's body rates as Euler-angle rates",
+        [
+            (
+                "controllers/estimation.py",
+                "self.quaternion = rotate_quaternion(self.quaternion, gyro * dt)",
+                "self.quaternion = quaternion_from_rpy(*(np.array(rpy_from_rotation(rotation)) + gyro * dt))",
+            )
+        ],
+    ),
+    "F2": (
+        "flip the sign of the estimator's gravity correction",
+        [
+            (
+                "controllers/estimation.py",
+                "cross3(measured_up / norm, rotation[2])",
+                "cross3(rotation[2], measured_up / norm)",
+            )
+        ],
+    ),
+    "F3": (
+        "flip the sign of the estimator's compass correction",
+        [
+            (
+                "controllers/estimation.py",
+                "correction += k * error * rotation[2]",
+                "correction -= k * error * rotation[2]",
+            )
+        ],
+    ),
+    "F4": (
+        "the depth target does not follow the climb (the old 'never release the captured depth')",
+        [("controllers/position_control.py", "            self.target_z += step\n", "            pass\n")],
+    ),
+    "F5": (
+        "the heading is captured once and not tracked while the yaw stick is deflected",
+        [
+            (
+                "controllers/flight_modes.py",
+                "self._heading, self._last_yaw_input_s = estimate.yaw, self.time_s",
+                "self._last_yaw_input_s = self.time_s",
+            ),
+            (
+                "controllers/flight_modes.py",
+                "            self._heading = estimate.yaw  # brake to zero rate",
+                "            self._heading = self._heading if self._heading is not None else estimate.yaw",
+            ),
+        ],
+    ),
+    "F6": (
+        "the heading captured at the stick's release, without ArduSub's 250 ms brake",
+        [("controllers/flight_modes.py", "HEADING_CAPTURE_DELAY_S = 0.25", "HEADING_CAPTURE_DELAY_S = 0.0")],
+    ),
+    "F7": (
+        "our PID's anti-windup forced on (never integrates)",
+        [
+            (
+                "controllers/pid.py",
+                "        if abs(output) <= limit or (output > limit and e < 0)",
+                "        if False and (output > limit and e < 0)",
+            )
+        ],
+    ),
+    "F8": (
+        "our PID's anti-windup off (always integrates)",
+        [
+            (
+                "controllers/pid.py",
+                "        if abs(output) <= limit or (output > limit and e < 0)",
+                "        if True or (output > limit and e < 0)",
+            )
+        ],
+    ),
+    "F9": (
+        "reverse thrust linearised against the forward maximum",
+        [
+            (
+                "controllers/thrusters.py",
+                "c * curve.max_forward_n, c * curve.max_reverse_n)",
+                "c * curve.max_forward_n, c * curve.max_forward_n)",
+            )
+        ],
+    ),
+    "F10": (
+        "the old throttle dead zone, 0.05 of the stick",
+        [
+            (
+                "controllers/flight_modes.py",
+                "throttle_dead_zone: float = 100.0 / 500.0",
+                "throttle_dead_zone: float = 0.05",
+            )
+        ],
+    ),
+    "F11": (
+        "AC_PID differentiates the measurement instead of the error",
+        [
+            (
+                "controllers/pid.py",
+                "derivative = (self._error - error_last) / dt",
+                "derivative = -(measurement - getattr(self, '_m', measurement)) / dt",
+            ),
+            (
+                "controllers/pid.py",
+                "        if g.ki != 0.0:\n",
+                "        self._m = measurement\n        if g.ki != 0.0:\n",
+            ),
+        ],
+    ),
+    "F12": (
+        "AC_PID's integrator ignores the limit flag",
+        [("controllers/pid.py", "            if not limit or shrinking:", "            if True:")],
+    ),
+    "F13": (
+        "the angle loop a plain P, without sqrt_controller's braking curve",
+        [
+            (
+                "controllers/pid.py",
+                "    if second_order_limit <= 0.0:\n        rate = error * p",
+                "    if True:\n        rate = error * p",
+            )
+        ],
+    ),
+    "F14": (
+        "MANUAL_CONTROL out of range dropped instead of clamped",
+        [
+            (
+                "controllers/mavlink_wire.py",
+                "    if not all(math.isfinite(v) for v in values):",
+                "    if not manual_control_in_range(*values) or not all(math.isfinite(v) for v in values):",
+            )
+        ],
+    ),
 }
 
 
@@ -164,7 +305,16 @@ def run(ids: list[str]) -> int:
                     raise SystemExit(f"{key}: the text to mutate is not in {name}; update the mutation list")
                 path.write_text(current.replace(old, new, 1))
             result = subprocess.run(
-                [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *TESTS],
+                [
+                    sys.executable,
+                    "-m",
+                    "pytest",
+                    "-x",
+                    "-q",
+                    "-p",
+                    "no:cacheprovider",
+                    *TESTS_OF_GROUP[key[0]],
+                ],
                 cwd=ROOT,
                 capture_output=True,
                 text=True,
