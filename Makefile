@@ -9,7 +9,7 @@ RUN_DIR ?= runs/mission
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: setup run test bench golden lint clean
+.PHONY: setup run test sitl-test bench golden lint clean
 
 setup: $(STAMP)
 
@@ -31,6 +31,11 @@ run: setup
 
 test: setup
 	$(BIN)/python -m pytest -q
+
+# the tests against real ArduSub firmware: ARDUSUB_SITL=/path/to/ardusub make sitl-test (README, SITL)
+sitl-test: setup
+	@test -n "$$ARDUSUB_SITL" || { echo "set ARDUSUB_SITL to an ArduSub SITL binary (README: ArduSub SITL on our physics)"; exit 2; }
+	$(BIN)/python -m pytest -q -m sitl
 
 bench: setup
 	$(BIN)/python tests/bench/bench_discovery.py

@@ -102,6 +102,18 @@ class ModeParams:
     linearise_thrust: bool = True
     position: PosControlGains = field(default_factory=PosControlGains)
 
+    def __post_init__(self) -> None:
+        for name in ("max_lean_deg", "max_yaw_rate_deg_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+        if not 0.0 < self.max_lean_deg <= 80.0:  # ArduSub bounds ANGLE_MAX to 1000-8000 cdeg
+            raise ValueError(f"max_lean_deg must lie in (0, 80], got {self.max_lean_deg!r}")
+        for name in ("roll_pitch_dead_zone", "yaw_dead_zone", "throttle_dead_zone", "translation_dead_zone"):
+            value = getattr(self, name)
+            if not 0.0 <= value < 1.0:
+                raise ValueError(f"{name} must lie in [0, 1), got {value!r}")
+
 
 def pilot_lean_angles(roll_stick: float, pitch_stick: float, params: ModeParams) -> tuple[float, float]:
     """ArduSub's ``get_pilot_desired_lean_angles`` on normalised sticks: the target roll and pitch (rad;

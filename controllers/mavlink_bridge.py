@@ -34,6 +34,7 @@ wrongly signed packets from the vehicle are dropped and counted.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import signal
 import threading
@@ -70,6 +71,9 @@ MAV_RESULT_ACCEPTED = 0
 WATER_DENSITY_KG_M3 = 997.0  # fresh water at 25 C; ArduSub's default specific gravity is 1.0
 STANDARD_PRESSURE_HPA = 1013.25
 GRAVITY = 9.80665
+# depth telemetry, best first: the autopilot's fused estimate, its altitude, the raw pressure sensor
+DEPTH_SOURCES = ("LOCAL_POSITION_NED", "VFR_HUD", "SCALED_PRESSURE2")
+DEPTH_FRESH_S = 1.5  # ArduSub streams these at 2 to 10 Hz: older than this, a source is not current
 
 
 class BridgeError(RuntimeError):
@@ -98,8 +102,11 @@ class VehicleTelemetry:
 
     attitude_ned: ATTITUDE roll, pitch, yaw (rad, FRD); rates_frd: rollspeed, pitchspeed, yawspeed
     (rad/s); position_ned, velocity_ned: LOCAL_POSITION_NED (m, m/s; None until one arrives);
-    depth_m: from SCALED_PRESSURE2 (the depth sensor) or VFR_HUD's altitude; servo_pwm:
-    SERVO_OUTPUT_RAW (us, servo 1 first)."""
+    depth_m: the best fresh depth (:data:`DEPTH_SOURCES`, best first): the autopilot's own estimate in
+    LOCAL_POSITION_NED, then its altitude in VFR_HUD, then the raw pressure sensor in SCALED_PRESSURE2
+    (in ArduSub SITL that is the second barometer, with about 0.12 m of noise); ``depth_source`` names
+    it and ``depth_age_s()`` says how old it is. When none is fresh the last value stays, and the
+    bridge warns once that it is stale; servo_pwm: SERVO_OUTPUT_RAW (us, servo 1 first)."""
 
     system_id: int | None = None
     armed: bool = False
@@ -109,12 +116,33 @@ class VehicleTelemetry:
     position_ned: np.ndarray | None = None
     velocity_ned: np.ndarray | None = None
     depth_m: float | None = None
+    depth_source: str | None = None
+    depths: dict[str, tuple[float, float]] = field(default_factory=dict)  # source: (depth m, monotonic s)
     heading_deg: float | None = None
     servo_pwm: tuple[int, ...] = ()
+    ekf_flags: int | None = None  # EKF_STATUS_REPORT.flags (ArduPilot sends it; our simulator does not)
     last_heartbeat_s: float = 0.0
     last_message_s: float = 0.0
     messages: int = 0
     bad_packets: int = 0
+
+    def update_depth(self, source: str, depth_m: float, now_s: float | None = None) -> None:
+        """Record ``source``'s depth reading and choose the best fresh one as :attr:`depth_m`."""
+        now = time.monotonic() if now_s is None else now_s
+        if math.isfinite(depth_m):
+            self.depths[source] = (float(depth_m), now)
+        for name in DEPTH_SOURCES:
+            reading = self.depths.get(name)
+            if reading is not None and now - reading[1] <= DEPTH_FRESH_S:
+                self.depth_m, self.depth_source = reading[0], name
+                return
+
+    def depth_age_s(self, now_s: float | None = None) -> float | None:
+        """How old :attr:`depth_m` is (s), or None before any depth came."""
+        if self.depth_source is None:
+            return None
+        now = time.monotonic() if now_s is None else now_s
+        return now - self.depths[self.depth_source][1]
 
     def estimate(self, surface_z_m: float = 0.0) -> StateEstimate:
         """The telemetry as the :class:`controllers.estimation.StateEstimate` the feedback controllers
@@ -180,6 +208,7 @@ class MavlinkBridge:
         self.telemetry = VehicleTelemetry()
         self.link_lost = False
         self.link_stalled = False
+        self.depth_stale = False  # the depth telemetry has stopped (warned once until it returns)
         self._arm_requested = False
         self._command = np.zeros(6)
         self._lock = threading.RLock()
@@ -286,16 +315,29 @@ class MavlinkBridge:
         self._arm_requested = False
         self.wait_for(lambda t: not t.armed, timeout_s, "the vehicle to report disarmed")
 
-    def set_mode(self, mode: str, timeout_s: float | None = None) -> None:
+    def set_mode(self, mode: str, timeout_s: float | None = None, retry_for_s: float = 0.0) -> None:
         """Switch to ``mode`` (one of :data:`controllers.mavlink_wire.BRIDGE_MODES`) with
-        MAV_CMD_DO_SET_MODE, and wait for the acknowledgement and the heartbeat to show it."""
+        MAV_CMD_DO_SET_MODE, and wait for the acknowledgement and the heartbeat to show it. A vehicle
+        that refuses (ArduSub refuses ALT_HOLD until its depth estimate is ready) is asked again once a
+        second for up to ``retry_for_s`` seconds; then the last refusal is raised."""
         name = mode.lower().replace("-", "_")
         name = {"depth_hold": "alt_hold", "position_hold": "poshold"}.get(name, name)
         if name not in BRIDGE_MODES:
             raise ValueError(f"unknown mode {mode!r}; choose one of {', '.join(BRIDGE_MODES)}")
-        self._command_long(
-            MAV_CMD_DO_SET_MODE, [MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, ARDUSUB_MODES[name]], timeout_s
-        )
+        if not (math.isfinite(retry_for_s) and retry_for_s >= 0.0):
+            raise ValueError(f"retry_for_s must be finite and >= 0, got {retry_for_s!r}")
+        deadline = time.monotonic() + retry_for_s
+        while True:
+            try:
+                self._command_long(
+                    MAV_CMD_DO_SET_MODE, [MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, ARDUSUB_MODES[name]], timeout_s
+                )
+                break
+            except BridgeError as error:
+                if "refused" not in str(error) or time.monotonic() + 1.0 > deadline:
+                    raise
+                log.info("%s; asking again for mode %s", error, name)
+                time.sleep(1.0)
         self.wait_for(lambda t: t.mode == name, timeout_s, f"the vehicle to report mode {name}")
 
     def set_position_target(self, north_m: float, east_m: float, down_m: float, yaw_rad: float = 0.0) -> None:
@@ -332,7 +374,8 @@ class MavlinkBridge:
             self._acks.pop(command, None)
         with self._send_lock:
             self._connection.mav.command_long_send(*self._target(), command, 0, *params)
-        deadline = time.monotonic() + (self.params.ack_timeout_s if timeout_s is None else timeout_s)
+        wait_s = self.params.ack_timeout_s if timeout_s is None else timeout_s
+        deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline:
             with self._lock:
                 result = self._acks.get(command)
@@ -341,9 +384,7 @@ class MavlinkBridge:
                     raise BridgeError(f"command {command} refused by the vehicle (MAV_RESULT {result})")
                 return
             time.sleep(0.01)
-        raise BridgeError(
-            f"no acknowledgement of command {command} within {deadline - time.monotonic():.0f} s"
-        )
+        raise BridgeError(f"no acknowledgement of command {command} within {wait_s:g} s")
 
     def _send_heartbeat(self) -> None:
         from pymavlink import mavutil
@@ -397,12 +438,15 @@ class MavlinkBridge:
         elif kind == "LOCAL_POSITION_NED":
             t.position_ned = np.array([message.x, message.y, message.z])
             t.velocity_ned = np.array([message.vx, message.vy, message.vz])
+            t.update_depth("LOCAL_POSITION_NED", float(message.z))
         elif kind == "SCALED_PRESSURE2":
-            t.depth_m = (message.press_abs - STANDARD_PRESSURE_HPA) * 100.0 / (WATER_DENSITY_KG_M3 * GRAVITY)
+            depth = (message.press_abs - STANDARD_PRESSURE_HPA) * 100.0 / (WATER_DENSITY_KG_M3 * GRAVITY)
+            t.update_depth("SCALED_PRESSURE2", depth)
         elif kind == "VFR_HUD":
             t.heading_deg = float(message.heading)
-            if t.depth_m is None:
-                t.depth_m = -float(message.alt)
+            t.update_depth("VFR_HUD", -float(message.alt))
+        elif kind == "EKF_STATUS_REPORT":
+            t.ekf_flags = int(message.flags)
         elif kind == "SERVO_OUTPUT_RAW":
             t.servo_pwm = tuple(int(getattr(message, f"servo{k}_raw", 0)) for k in range(1, 17))
 
@@ -433,6 +477,13 @@ class MavlinkBridge:
                 if self.on_link_lost is not None:
                     self.on_link_lost()
             self.link_stalled = now - self.telemetry.last_message_s > p.stall_timeout_s
+            age = self.telemetry.depth_age_s(now)
+            if age is not None and age > DEPTH_FRESH_S and not self.depth_stale:
+                self.depth_stale = True
+                log.warning("no depth telemetry for %.1f s on %s: the depth is stale", age, self.url)
+            elif age is not None and age <= DEPTH_FRESH_S and self.depth_stale:
+                self.depth_stale = False
+                log.warning("depth telemetry back on %s (%s)", self.url, self.telemetry.depth_source)
             if now >= next_command:
                 self._send_pilot(np.zeros(6) if self.link_stalled else self.command)
                 next_command = now + p.command_period_s

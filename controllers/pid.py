@@ -147,6 +147,11 @@ class ACPIDGains:
     error_filter_hz: float = 0.0
     derivative_filter_hz: float = 0.0
 
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"AC_PID {name} must be finite and >= 0, got {value!r}")
+
 
 class ACPID:
     """ArduPilot's AC_PID (libraries/AC_PID/AC_PID.cpp, ``update_all``), without its slew limiter

@@ -10,8 +10,12 @@ JSON/``):
   SERVO_32_ENABLE it is ``<HHI32H`` with magic 29569. It comes from an ephemeral port: the answer goes
   back to that address.
 - Lockstep: the physics steps 1 / frame_rate seconds and answers once. A repeated frame_count means our
-  answer was lost and SITL resends: it gets no second step and no answer. A lower frame_count means SITL
-  restarted: the simulation is reset.
+  answer was lost and SITL resends (about once a second, its clock frozen until an answer comes): it
+  gets the same answer again, without a second step. A lower frame_count means SITL restarted: the
+  simulation is reset to the scenario's start, and the backend says so (``on_event``). A first
+  frame_count past one second of frames means SITL was already running when this backend started (the
+  backend restarted under it): the firmware, armed or not, meets a world at the start pose, and the
+  backend says that too.
 - The answer is one JSON object, with a newline before and after, and no space after a colon (ArduPilot's
   parser rejects it): ``timestamp`` (s of physics time), ``imu.gyro`` (rad/s, body FRD),
   ``imu.accel_body`` (m/s^2, body FRD, the specific force: about (0, 0, -9.81) at rest, level),
@@ -31,6 +35,8 @@ import math
 import socket
 import struct
 import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import mujoco
@@ -52,7 +58,8 @@ class JsonBackendError(RuntimeError):
 
 @dataclass
 class JsonCounters:
-    """Packets seen, answered, repeated (answer lost, not stepped again) and dropped as malformed."""
+    """Packets seen, answered, repeated (answer lost: the last answer sent again, not stepped again) and
+    dropped as malformed; SITL restarts."""
 
     packets: int = 0
     answered: int = 0
@@ -94,9 +101,19 @@ class JsonBackend:
     """Our physics as ArduPilot SITL's JSON backend for one robot (module docstring)."""
 
     def __init__(
-        self, sim: Simulation, robot: str | None = None, port: int = 9002, host: str = "0.0.0.0"
+        self,
+        sim: Simulation,
+        robot: str | None = None,
+        port: int = 9002,
+        host: str = "0.0.0.0",
+        on_event: Callable[[str], None] | None = None,
     ) -> None:
+        """``on_event`` is called with one line for each thing a user should know: a SITL restart, a
+        SITL that was already running, no packets yet (default: kept in :attr:`events` only)."""
         self.sim = sim
+        self.events: list[str] = []
+        self._on_event = on_event
+        self._last_answer: bytes | None = None
         self.robot = robot or sim.robots[0]
         if self.robot not in sim.robots:
             raise ValueError(f"unknown robot {self.robot!r}; robots: {', '.join(sim.robots)}")
@@ -132,42 +149,80 @@ class JsonBackend:
             self._socket.close()
             self._socket = None
 
-    def run(self, duration_s: float | None = None) -> None:
-        """Answer servo packets until :meth:`stop` (or ``duration_s`` of simulated time)."""
+    def _event(self, line: str) -> None:
+        self.events.append(line)
+        if self._on_event is not None:
+            self._on_event(line)
+
+    def run(
+        self,
+        duration_s: float | None = None,
+        idle_timeout_s: float | None = None,
+        notice_after_s: float = 5.0,
+    ) -> bool:
+        """Answer servo packets until :meth:`stop`, ``duration_s`` of simulated time, or
+        ``idle_timeout_s`` of wall time without a packet (None: wait for ever). Says once when no packet
+        has come after ``notice_after_s``. Returns False when it stopped for want of packets."""
         if self._socket is None:
             self.open()
         start = self.sim.time
+        last_packet = time.monotonic()
+        noticed = False
         while not self._stop.is_set():
             if duration_s is not None and self.sim.time - start >= duration_s:
                 break
             try:
                 data, address = self._socket.recvfrom(4096)
             except TimeoutError:
+                idle = time.monotonic() - last_packet
+                if not noticed and idle >= notice_after_s:
+                    noticed = True
+                    self._event(
+                        f"no servo packets from ArduPilot SITL on UDP port {self.port} after "
+                        f"{notice_after_s:g} s: start it with --model JSON (README, ArduSub SITL)"
+                    )
+                if idle_timeout_s is not None and idle >= idle_timeout_s:
+                    self._event(f"no servo packet for {idle_timeout_s:g} s: stopped")
+                    return False
                 continue
             except OSError:
                 if self._socket is None:
                     break
                 continue
+            last_packet = time.monotonic()
             answer = self.handle(data)
             if answer is not None:
                 self._socket.sendto(answer, address)
+        return True
 
     def handle(self, data: bytes) -> bytes | None:
-        """One packet in, the answer out (None: no answer, for a repeat or a malformed packet)."""
+        """One packet in, the answer out (None for a malformed packet; a repeat gets the last answer
+        again, without a step)."""
         self.counters.packets += 1
         try:
             packet = parse_servo_packet(data)
         except ValueError:
             self.counters.bad_packets += 1
             return None
-        if self._last_frame is not None:
-            if packet.frame_count == self._last_frame:
-                self.counters.repeated += 1
-                return None
-            if packet.frame_count < self._last_frame:  # SITL restarted
-                self.counters.restarts += 1
-                self.sim.reset()
-                self._target_time = self.sim.time
+        if self._last_frame is None:
+            if packet.frame_count > packet.frame_rate:
+                self._event(
+                    f"SITL was already running (its first frame here is {packet.frame_count}): it meets a "
+                    f"world at the scenario's start pose and physics time {self.sim.time:.3f} s; if it "
+                    "was armed, disarm it and let its EKF settle before flying"
+                )
+        elif packet.frame_count == self._last_frame:
+            # SITL resends a frame whose answer it did not get: the answer was lost, so send it again
+            self.counters.repeated += 1
+            return self._last_answer
+        elif packet.frame_count < self._last_frame:
+            self.counters.restarts += 1
+            self._event(
+                f"SITL restarted (frame {packet.frame_count} after {self._last_frame}): the world was reset "
+                f"to the scenario's start pose at t = 0 (it was at t = {self.sim.time:.3f} s)"
+            )
+            self.sim.reset()
+            self._target_time = self.sim.time
         self._last_frame = packet.frame_count
         pwm = np.array(packet.pwm[: self.n_thrusters], float)
         commands = np.where(pwm == 0, 0.0, pwm_to_command(np.where(pwm == 0, 1500.0, pwm)))
@@ -179,7 +234,8 @@ class JsonBackend:
         if n_steps > 0:
             self.sim.advance_physics(n_steps)
         self.counters.answered += 1
-        return self.state_json().encode("ascii")
+        self._last_answer = self.state_json().encode("ascii")
+        return self._last_answer
 
     def state(self) -> dict:
         """The robot's true state in ArduPilot's frames (the answer's fields)."""

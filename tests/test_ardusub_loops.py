@@ -169,3 +169,16 @@ def test_the_sitl_comparison_reads_its_responses_as_a_pilot_would():
     assert measured["yaw_rate_deg_s"] == pytest.approx(-20.0) and measured["roll_deg"] == pytest.approx(8.0)
     ours = fly_ours(heading)
     assert ours["change_deg"] < -90.0 and ours["bounce_back_deg"] < 3.0
+
+
+def test_bad_loop_parameters_are_refused():
+    with pytest.raises(ValueError, match="AC_PID kp"):
+        ACPIDGains(kp=-0.1)
+    with pytest.raises(ValueError, match="target_filter_hz"):
+        ACPIDGains(kp=0.1, target_filter_hz=math.inf)
+    with pytest.raises(ValueError, match="throttle_dead_zone"):
+        ModeParams(throttle_dead_zone=1.0)
+    with pytest.raises(ValueError, match="max_lean_deg"):
+        ModeParams(max_lean_deg=90.0)
+    with pytest.raises(ValueError, match="max_yaw_rate_deg_s"):
+        ModeParams(max_yaw_rate_deg_s=math.nan)

@@ -421,16 +421,75 @@ def test_json_backend_answers_a_recorded_packet_field_by_field():
     ax, ay, az = state["imu"]["accel_body"]
     assert az == pytest.approx(-9.81, abs=0.1) and abs(ax) < 0.05 and abs(ay) < 0.05  # specific force, FRD
     assert np.allclose(state["imu"]["gyro"], 0, atol=1e-3)
-    # the same frame again: the answer was lost, no second step and no answer
-    assert backend.handle(packet) is None and backend.counters.repeated == 1
+    # the same frame again: the answer was lost, so the same answer again, without a second step
+    time_before = sim.time
+    assert backend.handle(packet).decode() == answer and backend.counters.repeated == 1
+    assert sim.time == time_before
     # 32 channels are fine; junk is counted and dropped
     assert backend.handle(struct.pack("<HHI32H", 29569, 1200, 2, *([1500] * 32))) is not None
     for junk in (b"", b"\x00" * 40, struct.pack(SERVO_LAYOUT, 1234, 1200, 3, *([1500] * 16)), os.urandom(57)):
         assert backend.handle(junk) is None
     assert backend.counters.bad_packets == 4
-    # frame_count going backwards: SITL restarted, so the world does too
+    # frame_count going backwards: SITL restarted, so the world does too, and the backend says so
     backend.handle(struct.pack(SERVO_LAYOUT, 18458, 1200, 1, *([1500] * 16)))
     assert backend.counters.restarts == 1 and sim.time < 0.01
+    assert any("SITL restarted" in line and "reset" in line for line in backend.events)
+
+
+def test_a_backend_started_under_a_running_sitl_says_what_sitl_meets():
+    sim = Simulation()
+    sim.reset(seed=0)
+    heard = []
+    backend = JsonBackend(sim, on_event=heard.append)
+    assert backend.handle(struct.pack(SERVO_LAYOUT, 18458, 1200, 1, *([1500] * 16))) is not None
+    assert heard == []  # a fresh SITL's first frames: nothing to say
+    fresh = JsonBackend(sim, on_event=heard.append)
+    assert fresh.handle(struct.pack(SERVO_LAYOUT, 18458, 1200, 50000, *([1500] * 16))) is not None
+    assert len(heard) == 1 and "already running" in heard[0] and "start pose" in heard[0]
+
+
+def test_sitls_clock_keeps_moving_when_answers_are_lost():
+    """A fake SITL in lockstep over UDP, as SIM_JSON.cpp is: it sends frame k until an answer comes,
+    resending the same frame when none does. One answer in ten is dropped on the way back; the backend
+    answers each resend with the answer it lost, so every frame is stepped once and the clock moves on."""
+    sim = Simulation()
+    sim.reset(seed=0)
+    backend = JsonBackend(sim, port=0, host="127.0.0.1").open()
+    thread = threading.Thread(target=backend.run, daemon=True)
+    thread.start()
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    client.settimeout(2.0)
+    rng = np.random.default_rng(0)
+    frames, dropped, stamps = 600, 0, []
+    try:
+        for k in range(1, frames + 1):
+            packet = struct.pack(SERVO_LAYOUT, 18458, 400, k, *([1500] * 16))
+            while True:
+                client.sendto(packet, ("127.0.0.1", backend.port))
+                answer = json.loads(client.recv(4096))  # a lost answer would time out here
+                if rng.random() < 0.1:
+                    dropped += 1  # lost on the way back: SITL resends the same frame
+                    continue
+                stamps.append(answer["timestamp"])
+                break
+    finally:
+        backend.stop()
+        thread.join(timeout=5)
+        backend.close()
+        client.close()
+    assert dropped > 30 and backend.counters.repeated == dropped
+    assert backend.counters.answered == frames
+    assert np.all(np.diff(stamps) > 0)
+    assert stamps[-1] == pytest.approx(frames / 400, abs=sim.scenario.timestep_s)
+
+
+def test_the_json_backend_stops_when_no_sitl_ever_comes(capsys):
+    port = free_port()
+    args = ["sim-vehicle", "--ardupilot-json", "--port", str(port), "--duration", "2", "--idle-timeout", "1"]
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    assert "no servo packet for 1 s: stopped" in err
+    assert main(["sim-vehicle", "--ardupilot-json", "--idle-timeout", "-1"]) == 2
 
 
 def test_a_fake_ardupilot_over_udp_hovers_level_and_yaws_the_right_way():
@@ -475,33 +534,6 @@ def _euler_from_quaternion(q):
     pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
     yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
     return roll, pitch, yaw
-
-
-@pytest.mark.skipif(not os.environ.get("ARDUSUB_SITL"), reason="set ARDUSUB_SITL to an ardusub SITL binary")
-def test_real_ardusub_sitl_holds_depth_on_our_physics(tmp_path):
-    """ArduSub firmware (SITL, --model JSON) on our physics: arm, ALT_HOLD, and the depth holds."""
-    sim = Simulation()
-    sim.reset(seed=0)
-    backend = JsonBackend(sim, port=free_port(), host="127.0.0.1").open()
-    thread = threading.Thread(target=backend.run, daemon=True)
-    thread.start()
-    defaults = tmp_path / "sub.parm"
-    defaults.write_text("FRAME_CONFIG 2\nARMING_CHECK 0\n")  # the Heavy; no GPS or compass calibration here
-    command = [os.environ["ARDUSUB_SITL"], "--model", "JSON:127.0.0.1", "--home", "-35.0,149.0,0,0"]
-    command += ["-I0", "--sim-port-out", str(backend.port), "--defaults", str(defaults)]
-    sitl = subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        with MavlinkBridge("tcp:127.0.0.1:5760", BridgeParams(connect_timeout_s=60)) as bridge:
-            bridge.set_mode("alt_hold")
-            bridge.arm(timeout_s=30)
-            start = bridge.telemetry.depth_m
-            time.sleep(10)
-            assert abs(bridge.telemetry.depth_m - start) < 0.1
-    finally:
-        sitl.terminate()
-        backend.stop()
-        thread.join(timeout=5)
-        backend.close()
 
 
 # ----- failsafes on the way out ---------------------------------------------------------------------
@@ -591,3 +623,63 @@ def test_the_bridge_connects_over_tcp_too():
         vehicle.stop()
         thread.join(timeout=5)
         vehicle.close()
+
+
+def test_the_bridge_takes_the_best_fresh_depth_and_never_freezes_on_one_source():
+    """LOCAL_POSITION_NED (the autopilot's estimate) beats VFR_HUD beats SCALED_PRESSURE2 (the raw
+    sensor); a source that stops is passed over for the next one that is still coming."""
+    from controllers.mavlink_bridge import DEPTH_FRESH_S, VehicleTelemetry
+
+    t = VehicleTelemetry()
+    assert t.depth_m is None and t.depth_age_s() is None
+    t.update_depth("SCALED_PRESSURE2", 1.30, now_s=0.0)
+    assert (t.depth_m, t.depth_source) == (1.30, "SCALED_PRESSURE2")
+    t.update_depth("VFR_HUD", 1.10, now_s=0.1)
+    assert (t.depth_m, t.depth_source) == (1.10, "VFR_HUD")
+    t.update_depth("LOCAL_POSITION_NED", 1.00, now_s=0.2)
+    t.update_depth("SCALED_PRESSURE2", 1.40, now_s=0.3)
+    assert (t.depth_m, t.depth_source) == (1.00, "LOCAL_POSITION_NED")
+    # the estimate stops; the pressure sensor goes on and its readings move: they are used, not frozen
+    for k, depth in enumerate((1.5, 1.6, 1.7)):
+        t.update_depth("SCALED_PRESSURE2", depth, now_s=0.3 + DEPTH_FRESH_S + 0.5 * (k + 1))
+    assert (t.depth_m, t.depth_source) == (1.7, "SCALED_PRESSURE2")
+    assert t.depth_age_s(now_s=0.3 + DEPTH_FRESH_S + 1.5 + 4.0) == pytest.approx(4.0)
+    t.update_depth("VFR_HUD", math.nan, now_s=10.0)  # a bad reading is no reading
+    assert t.depth_source == "SCALED_PRESSURE2"
+
+
+def test_the_bridge_warns_once_when_the_depth_telemetry_stops(caplog):
+    with Served(speedup=2.0) as served, MavlinkBridge(served.url) as bridge:
+        assert wait_until(lambda: bridge.telemetry.depth_m is not None)
+        assert bridge.telemetry.depth_source == "LOCAL_POSITION_NED"  # the vehicle's own estimate
+        with caplog.at_level("WARNING", logger="controllers.mavlink_bridge"):
+            for name in ("LOCAL_POSITION_NED", "VFR_HUD", "SCALED_PRESSURE2"):  # the depth stops coming
+                served.vehicle._rates[name] = 0.0
+            assert wait_until(lambda: bridge.depth_stale, 10)
+            time.sleep(1.0)
+            assert not bridge.link_lost  # heartbeats and attitude go on: only the depth is stale
+        assert sum("the depth is stale" in r.getMessage() for r in caplog.records) == 1
+
+
+def test_set_mode_asks_again_while_the_vehicle_refuses_within_its_bound(monkeypatch):
+    """ArduSub refuses ALT_HOLD ("need alt estimate") for its first seconds: the bridge asks again once a
+    second within retry_for_s, and raises the refusal past it."""
+    bridge = MavlinkBridge("udpout:127.0.0.1:9")
+    monkeypatch.setattr("controllers.mavlink_bridge.time.sleep", lambda _s: None)
+    calls = []
+
+    def refuse_twice(command, values, timeout_s):
+        calls.append(command)
+        if len(calls) <= 2:
+            raise BridgeError(f"command {command} refused by the vehicle (MAV_RESULT 4)")
+        bridge.telemetry.mode = "alt_hold"
+
+    monkeypatch.setattr(bridge, "_command_long", refuse_twice)
+    bridge.set_mode("alt_hold", timeout_s=1.0, retry_for_s=5.0)
+    assert len(calls) == 3
+    calls.clear()
+    with pytest.raises(BridgeError, match="refused"):
+        bridge.set_mode("alt_hold", timeout_s=1.0)  # no retry asked: the first refusal stands
+    assert len(calls) == 1
+    with pytest.raises(ValueError, match="retry_for_s"):
+        bridge.set_mode("alt_hold", retry_for_s=-1.0)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from maptidal.cli.common import RunError, positive_float
+from maptidal.cli.common import RunError, finite_float, positive_float
 
 MAX_WAYPOINTS = 1000
 CONTROL_PERIOD_S = 0.05  # 20 Hz, the bridge's streaming rate
@@ -92,6 +92,14 @@ def register(commands) -> None:
         "--ardupilot-json", action="store_true", help="be ArduPilot SITL's JSON physics backend"
     )
     vehicle.add_argument("--port", type=int, default=9002, help="JSON backend UDP port (default %(default)s)")
+    vehicle.add_argument(
+        "--idle-timeout",
+        type=finite_float,
+        default=300.0,
+        metavar="S",
+        help="with --ardupilot-json: stop, with status 1, after S wall seconds without a servo packet "
+        "(0: wait for ever; default %(default)s)",
+    )
     vehicle.add_argument("--seed", type=int, default=0, help="noise seed (default %(default)s)")
     vehicle.set_defaults(handler=run_sim_vehicle)
 
@@ -252,12 +260,19 @@ def _check_link(bridge) -> None:
 
 
 # ----- maptidal sim-vehicle -----------------------------------------------------------------------
+def _say(line: str) -> None:
+    """One line for the user on standard error, at once."""
+    print(line, file=sys.stderr, flush=True)
+
+
 def run_sim_vehicle(args: argparse.Namespace) -> int:
     """Handler of ``maptidal sim-vehicle``."""
     from controllers.mavlink_bridge import load_signing_key
     from envs.scenario import load_scenario
     from envs.simulation import Simulation
 
+    if args.idle_timeout < 0:
+        raise ValueError(f"--idle-timeout must be >= 0, got {args.idle_timeout}")
     scenario = load_scenario(args.scenario)
     sim = Simulation(scenario)
     sim.reset(seed=args.seed)
@@ -267,7 +282,7 @@ def run_sim_vehicle(args: argparse.Namespace) -> int:
         from envs.ardupilot_json import JsonBackend, JsonBackendError
 
         try:
-            server = JsonBackend(sim, args.robot, port=args.port).open()
+            server = JsonBackend(sim, args.robot, port=args.port, on_event=_say).open()
         except JsonBackendError as error:
             raise RunError(str(error)) from None
         print(f"ArduPilot JSON physics on UDP port {args.port} (robot {server.robot})", file=sys.stderr)
@@ -282,11 +297,15 @@ def run_sim_vehicle(args: argparse.Namespace) -> int:
             raise RunError(str(error)) from None
         print(f"simulated BlueROV2 {server.robot} on {args.connect}", file=sys.stderr)
     signal.signal(signal.SIGTERM, lambda *_: server.stop())
+    heard = True
     try:
-        server.run(args.duration)
+        if args.ardupilot_json:
+            heard = server.run(args.duration, idle_timeout_s=args.idle_timeout or None)
+        else:
+            server.run(args.duration)
     except KeyboardInterrupt:
         pass
     finally:
         server.close()
     print(json.dumps({"sim_time_s": round(sim.time, 3), "counters": vars(server.counters)}), file=sys.stderr)
-    return 0
+    return 0 if heard else 1
