@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -448,10 +449,10 @@ def test_a_backend_started_under_a_running_sitl_says_what_sitl_meets():
     assert len(heard) == 1 and "already running" in heard[0] and "start pose" in heard[0]
 
 
-def test_sitls_clock_keeps_moving_when_answers_are_lost():
-    """A fake SITL in lockstep over UDP, as SIM_JSON.cpp is: it sends frame k until an answer comes,
-    resending the same frame when none does. One answer in ten is dropped on the way back; the backend
-    answers each resend with the answer it lost, so every frame is stepped once and the clock moves on."""
+@contextlib.contextmanager
+def running_json_backend():
+    """The default scenario's JSON backend answering on a loopback UDP port in a thread, and a client
+    socket to play SITL with: ``(sim, backend, client)``; stopped and closed afterwards."""
     sim = Simulation()
     sim.reset(seed=0)
     backend = JsonBackend(sim, port=0, host="127.0.0.1").open()
@@ -459,9 +460,22 @@ def test_sitls_clock_keeps_moving_when_answers_are_lost():
     thread.start()
     client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     client.settimeout(2.0)
+    try:
+        yield sim, backend, client
+    finally:
+        backend.stop()
+        thread.join(timeout=5)
+        backend.close()
+        client.close()
+
+
+def test_sitls_clock_keeps_moving_when_answers_are_lost():
+    """A fake SITL in lockstep over UDP, as SIM_JSON.cpp is: it sends frame k until an answer comes,
+    resending the same frame when none does. One answer in ten is dropped on the way back; the backend
+    answers each resend with the answer it lost, so every frame is stepped once and the clock moves on."""
     rng = np.random.default_rng(0)
     frames, dropped, stamps = 600, 0, []
-    try:
+    with running_json_backend() as (sim, backend, client):
         for k in range(1, frames + 1):
             packet = struct.pack(SERVO_LAYOUT, 18458, 400, k, *([1500] * 16))
             while True:
@@ -472,11 +486,6 @@ def test_sitls_clock_keeps_moving_when_answers_are_lost():
                     continue
                 stamps.append(answer["timestamp"])
                 break
-    finally:
-        backend.stop()
-        thread.join(timeout=5)
-        backend.close()
-        client.close()
     assert dropped > 30 and backend.counters.repeated == dropped
     assert backend.counters.answered == frames
     assert np.all(np.diff(stamps) > 0)
@@ -493,14 +502,7 @@ def test_the_json_backend_stops_when_no_sitl_ever_comes(capsys):
 
 
 def test_a_fake_ardupilot_over_udp_hovers_level_and_yaws_the_right_way():
-    sim = Simulation()
-    sim.reset(seed=0)
-    backend = JsonBackend(sim, port=0, host="127.0.0.1").open()
-    thread = threading.Thread(target=backend.run, daemon=True)
-    thread.start()
-    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    client.settimeout(2.0)
-    try:
+    with running_json_backend() as (_sim, backend, client):
 
         def fly(pwm, frames, first):
             state = None
@@ -521,11 +523,6 @@ def test_a_fake_ardupilot_over_udp_hovers_level_and_yaws_the_right_way():
         assert turning["imu"]["gyro"][2] > 0.05  # FRD: positive z rate is clockwise from above, right
         _, _, yaw = _euler_from_quaternion(turning["quaternion"])
         assert yaw > math.radians(3)
-    finally:
-        backend.stop()
-        thread.join(timeout=5)
-        backend.close()
-        client.close()
 
 
 def _euler_from_quaternion(q):
