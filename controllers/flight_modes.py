@@ -127,6 +127,16 @@ def pilot_lean_angles(roll_stick: float, pitch_stick: float, params: ModeParams)
     return math.atan(math.cos(pitch) * math.tan(roll)), pitch
 
 
+def lean_stick(angle_rad: float, params: ModeParams) -> float:
+    """The roll or pitch stick that asks STABILIZE for ``angle_rad`` of lean on its own (the other stick
+    centred): the inverse of :func:`pilot_lean_angles` on one axis, saturating at ANGLE_MAX."""
+    fraction = min(1.0, abs(angle_rad) / math.radians(params.max_lean_deg))
+    if fraction == 0.0:
+        return 0.0
+    width = params.roll_pitch_dead_zone
+    return math.copysign(width + (1.0 - width) * fraction, angle_rad)
+
+
 def pilot_climb_rate(heave_stick: float, params: ModeParams) -> float:
     """ArduSub's ``get_pilot_desired_climb_rate`` on the normalised heave stick: m/s, up +."""
     g, width = params.position, params.throttle_dead_zone

@@ -174,8 +174,8 @@ def pole_placement_gains(
 
 
 class PoseController:
-    """Holds or tracks a pose (x, y, z, yaw) on the estimated state; optionally holds roll and pitch
-    level (the Heavy frame can; the standard frame has no pitch authority).
+    """Holds or tracks a pose (x, y, z, yaw) on the estimated state; optionally holds roll level and
+    pitch at the reference's pitch (the Heavy frame can; the standard frame has no pitch authority).
 
     Position is controlled in the world frame (x and y PIDs, z PID), the force rotated into the body
     frame by the estimated attitude, with feedforward of M a_ref + D v_ref from the reference.
@@ -242,7 +242,7 @@ class PoseController:
         )
         if self.hold_roll_pitch:
             wrench[3] = self.attitude[0].update(0.0, estimate.rpy[0], dt, measured_rate=rates[0])
-            wrench[4] = self.attitude[1].update(0.0, estimate.rpy[1], dt, measured_rate=rates[1])
+            wrench[4] = self.attitude[1].update(reference.pitch, estimate.rpy[1], dt, measured_rate=rates[1])
         return self.model.pilot_command(wrench)
 
 

@@ -62,13 +62,15 @@ class TrapezoidalProfile:
 
 @dataclass(frozen=True)
 class PoseReference:
-    """Where the vehicle should be at one instant: position, velocity, acceleration (world), yaw and rate."""
+    """Where the vehicle should be at one instant: position, velocity, acceleration (world), yaw and rate,
+    and the pitch (rad, nose down +) a vehicle that can pitch should hold (0: level)."""
 
     position: np.ndarray
     velocity: np.ndarray
     acceleration: np.ndarray
     yaw: float
     yaw_rate: float = 0.0
+    pitch: float = 0.0
 
 
 @dataclass(frozen=True)

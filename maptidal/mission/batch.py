@@ -34,6 +34,7 @@ from maptidal.progress import ProgressBar
 METRICS = {
     "tasks_found": "tasks",
     "tasks_done": "tasks",
+    "tasks_verified": "tasks",
     "pct_uninspected": "% of walls, occlusion on",
     "mean_views": "views per voxel",
     "mad": "MAD",

@@ -221,6 +221,8 @@ def mission_metrics(document: dict) -> dict:
         "finished": bool(document.get("finished")),
         "tasks_found": len(tasks),
         "tasks_done": sum(1 for t in tasks if t.get("completed")),
+        # done and seen: the true view of the capture within the task's tolerances (None: not judged)
+        "tasks_verified": sum(1 for t in tasks if t.get("verified")),
         "pct_uninspected": float(coverage.get("pct_uninspected", 100.0)),
         "mean_views": float(coverage.get("mean_views", 0.0)),
         "mad": coverage.get("mad"),  # None without captured views
@@ -241,10 +243,12 @@ def report_markdown(document: dict) -> str:
         "",
         summary_table(document),
         "",
-        f"Tasks: {m['tasks_found']} found, {m['tasks_done']} done. Coverage of the captured views (occlusion "
-        f"on): {m['pct_uninspected']:.1f} % of the walls uninspected. Comms: {m['messages']} messages, "
-        f"{m['bytes']} bytes, {m['lost']} lost.",
+        f"Tasks: {m['tasks_found']} found, {m['tasks_done']} said done by the robots, {m['tasks_verified']} "
+        "of them verified (the true view of the capture within the task's tolerances). Coverage of the "
+        f"verified views (occlusion on): {m['pct_uninspected']:.1f} % of the walls uninspected. Comms: "
+        f"{m['messages']} messages, {m['bytes']} bytes, {m['lost']} lost.",
         "",
+        *verification_lines(document),
         *timing_lines(document),
         "![top view](top_view.png)",
         "",
@@ -256,6 +260,20 @@ def report_markdown(document: dict) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def verification_lines(document: dict) -> list[str]:
+    """``report.md``'s table of tasks each robot said were done against those verified on the true pose
+    (``mission.json``'s ``done_by_robot``); none for a document without it."""
+    per_robot = document.get("done_by_robot")
+    if not per_robot:
+        return []
+    rows = ["| robot | said done | verified | share verified |", "|---|---|---|---|"]
+    for name, counts in per_robot.items():
+        claimed, verified = counts["claimed"], counts["verified"]
+        share = f"{100.0 * verified / claimed:.0f} %" if claimed else "n/a"
+        rows.append(f"| {name} | {claimed} | {verified} | {share} |")
+    return ["## Done and seen", "", *rows, ""]
 
 
 def timing_lines(document: dict) -> list[str]:
@@ -296,7 +314,7 @@ def summary_table(document: dict) -> str:
         ("simulated time", f"{m['completion_time_s']:.1f} s"),
         ("real-time factor", f"{rtf:.1f}x" if rtf else "n/a"),
         ("finished", str(m["finished"])),
-        ("tasks found / done", f"{m['tasks_found']} / {m['tasks_done']}"),
+        ("tasks found / done / verified", f"{m['tasks_found']} / {m['tasks_done']} / {m['tasks_verified']}"),
         ("tasks inspected twice", str(document.get("duplicate_inspections", "n/a"))),
         # a snapshot of the auction, not a fault: on a slow channel two bundles may hold a task for a while
         ("tasks in two bundles at the end", str(document.get("allocation_conflicts", "n/a"))),
@@ -322,6 +340,7 @@ def rebuild(root, tank) -> dict:
     tasks: dict[int, dict] = {}
     views = []
     robots: dict[str, str] = {}
+    done_by_robot: dict[str, dict[str, int]] = {}
     for event in events:
         kind = event["kind"]
         if kind == "start":
@@ -342,14 +361,19 @@ def rebuild(root, tank) -> dict:
             tasks[event["task"]]["assigned_to"] = event["robot"]
         elif kind == "done" and event["task"] in tasks:
             image = event.get("image")
+            verified = event.get("verified")  # None in logs older than the judgement
             # the image is written just after its event: a mission killed in between never wrote it
             tasks[event["task"]].update(
                 completed=True,
+                verified=verified,
                 completion_time=event["t"],
                 image=image if image and (root / image).is_file() else None,
                 assigned_to=event["robot"],
             )
-            if "view" in event:
+            counts = done_by_robot.setdefault(event["robot"], {"claimed": 0, "verified": 0})
+            counts["claimed"] += 1
+            counts["verified"] += int(bool(verified))
+            if "view" in event and verified:  # only the views that show their task are scored
                 views.append(event["view"])
         elif kind == "fail":
             robots[event["robot"]] = "failed"
@@ -362,6 +386,7 @@ def rebuild(root, tank) -> dict:
         "sim_time_s": max((e["t"] for e in events), default=0.0),
         "robots": snapshot.get("robots", robots),
         "tasks": sorted(tasks.values(), key=lambda t: t["id"]),
+        "done_by_robot": done_by_robot,
     }
     views_array = np.array(views).reshape(-1, 6)
     document["coverage"], occluded = coverage_of(views_array, tank)

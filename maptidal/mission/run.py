@@ -15,8 +15,11 @@ takes a frame's answer (the visual fix and the new tasks) at the robot's next fr
 the same whether the worker runs apart or inline, so the mission does not depend on which. The
 agents (:class:`maptidal.allocation.auction.AuctionSimulation`) exchange only their binary messages over
 the acoustic channel, in TDMA slots, in step with the physics. A robot explores first (a yaw sweep where
-it starts), then flies the first task on its CBBA path, holds it for ``dwell_s`` within the controller's
-tolerances, captures an image and marks the task done, which spreads over the channel too.
+it starts), then flies the first task on its CBBA path, pitching into the view where it can, holds it for
+``dwell_s`` with its camera, by its own estimate, within ``position_tolerance_m`` and
+``direction_tolerance_deg`` of the view, captures an image and marks the task done, which spreads over
+the channel too. The capture is judged on the true camera pose (:mod:`maptidal.mission.verification`):
+only verified views are scored. A view it cannot pitch to is declined, with the reason in the log.
 
 A robot that times out on a task gives it up (:meth:`maptidal.allocation.agent.CBBAAgent.give_up`): it
 leaves its bundle, so a teammate can win it. The mission ends when every robot has explored and every
@@ -39,6 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from controllers.estimation import rotation_from_rpy
+from controllers.flight_modes import lean_stick
 from controllers.pose import PoseController
 from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, Route
 from envs.rendering import check_render_samples, describe_renderer
@@ -57,6 +61,7 @@ from maptidal.free_space import free_space_mask
 from maptidal.mission.capture import camera_pose_from_body
 from maptidal.mission.outputs import MissionWriter
 from maptidal.mission.perception import FrameJob, FrameResult, start_perception
+from maptidal.mission.verification import check_view, pitch_to_fly, view_pitch
 from maptidal.mission.video import MissionVideo
 from maptidal.perception.frontend import POSE_SOURCES, FrontEnd, FrontEndParams
 from maptidal.perception.keyframing import KeyframeParams
@@ -139,8 +144,14 @@ class MissionParams:
     speed_m_s: float = 0.25
     dwell_s: float = 1.0
     task_timeout_s: float = 60.0
+    # a task is held, and judged, within these of its viewpoint and viewing direction (in full, pitch
+    # included: maptidal.mission.verification)
     position_tolerance_m: float = 0.15
-    yaw_tolerance_deg: float = 10.0
+    direction_tolerance_deg: float = 10.0
+    # the most a robot that can pitch (the Heavy) pitches in STABILIZE for a view: our choice; there the
+    # Heavy's restoring moment, 134 N x 4.9 cm x sin 45 = 4.6 N m (assets/bluerov2/README.md), takes a
+    # fifth of its some 21 N m of pitch authority. A robot that cannot pitch holds level
+    max_pitch_deg: float = 45.0
     snapshot_every_s: float = 10.0
     channel: ChannelParams = field(default_factory=ChannelParams)
     agent: AgentParams = field(default_factory=lambda: AgentParams(failure_timeout_s=40.0, heartbeat_s=10.0))
@@ -176,6 +187,17 @@ class MissionParams:
             raise ValueError(
                 "frame_rate_hz, command_rate_hz and task_timeout_s must be positive, dwell_s >= 0"
             )
+        if not (
+            math.isfinite(self.position_tolerance_m)
+            and self.position_tolerance_m > 0
+            and 0 < self.direction_tolerance_deg < 180
+            and 0 <= self.max_pitch_deg <= 80
+        ):
+            raise ValueError(
+                "position_tolerance_m must be positive, direction_tolerance_deg in (0, 180) and "
+                f"max_pitch_deg in [0, 80]; got {self.position_tolerance_m!r}, "
+                f"{self.direction_tolerance_deg!r}, {self.max_pitch_deg!r}"
+            )
         if not (math.isfinite(self.clearance_m) and self.clearance_m >= 0):
             raise ValueError(f"clearance_m must be finite and >= 0, got {self.clearance_m!r}")
         check_render_samples(self.render_samples)
@@ -198,6 +220,10 @@ class _Robot:
     activity: str = "explore"  # explore, fly, hold, idle, failed
     route: Route | None = None
     goal: PoseReference | None = None  # where the route to the current task ends
+    view: tuple[np.ndarray, np.ndarray] | None = None  # the current task's viewpoint and direction
+    max_pitch_deg: float = 0.0  # the most it pitches for a view (0: it cannot pitch)
+    claimed: int = 0  # tasks it said were done
+    verified: int = 0  # of those, the ones whose true view was within tolerance
     route_start_s: float = 0.0
     task_key: int | None = None
     task_started_s: float = 0.0
@@ -220,6 +246,13 @@ class _Robot:
     def active(self) -> bool:
         """In the mission now: neither waiting to join nor failed."""
         return self.activity not in ("waiting", "failed")
+
+
+def _can_pitch(vehicle) -> bool:
+    """Whether the vehicle's thrusters can pitch it either way (the Heavy's can; the standard frame's
+    cannot)."""
+    authority = vehicle.controller_model().authority
+    return min(authority[0][4], authority[1][4]) > 0
 
 
 def _drawing_thread() -> ThreadPoolExecutor:
@@ -340,6 +373,10 @@ class Mission:
                 camera_offsets(spec.vehicle, self.sim.camera)["left"],
                 np.asarray(spec.vehicle.sensors.camera_position, float),
                 has_dvl="dvl" in spec.sensors,
+                # STABILIZE holds a pitch only on a frame with pitch authority (the Heavy)
+                max_pitch_deg=params.max_pitch_deg
+                if spec.vehicle.controller_model().authority[0][4] > 0
+                else 0.0,
             )
             robot = self.robots[spec.name]
             self.robots_by_index[index] = robot
@@ -399,6 +436,10 @@ class Mission:
 
     def _reference(self, robot: _Robot, now: float):
         reference = robot.route.at(now - robot.route_start_s)
+        if robot.activity == "fly" and robot.goal is not None and robot.goal.pitch:
+            # pitch into the view as the route closes in on it, and be there on arrival
+            share = min(1.0, (now - robot.route_start_s) / max(robot.route.duration, 1e-9))
+            reference = dataclasses.replace(reference, pitch=robot.goal.pitch * share)
         if self._lost(robot, now):
             # no horizontal position for a while (no DVL, no visual fix): hold depth and heading, and do not
             # chase a goal the robot cannot tell it has reached (that flies it away at full speed)
@@ -531,9 +572,13 @@ class Mission:
                 if robot.active and command_due:
                     # between commands the simulator holds each robot's last one, as ArduSub holds the
                     # last pilot input it was streamed
-                    commands[robot.name] = robot.controller.update(
-                        self._estimate(robot), self._reference(robot, now), command_every
-                    )
+                    reference = self._reference(robot, now)
+                    command = robot.controller.update(self._estimate(robot), reference, command_every)
+                    if reference.pitch:
+                        # STABILIZE holds the lean its pitch stick asks for (pilot pitch: nose up +)
+                        command = command.copy()
+                        command[4] = lean_stick(-reference.pitch, self.sim.mode_params)
+                    commands[robot.name] = command
                 elif robot.activity == "waiting":
                     self.sim.place(robot.name, robot.launch[0], robot.launch[1])  # parked, at rest
                 elif robot.activity == "failed":
@@ -740,13 +785,25 @@ class Mission:
             if key is None:
                 return
             task = next(t for t in agent.tasks if t.key == key)
+            needed = view_pitch(task.direction)
+            pitch = pitch_to_fly(needed, robot.max_pitch_deg, self.params.direction_tolerance_deg)
+            if pitch is None:  # the camera cannot be pointed along the view: give it up, and say why
+                robot.skipped.add(key)
+                agent.give_up(key, now)
+                reason = (
+                    f"the view needs {math.degrees(needed):.0f} deg of pitch; {robot.name} pitches at most "
+                    f"{robot.max_pitch_deg:g} deg (tolerance {self.params.direction_tolerance_deg:g} deg)"
+                )
+                self.writer.event(now, "declined", robot=robot.name, task=key, reason=reason)
+                return
             estimate = self._estimate(robot)
             yaw = math.atan2(task.direction[1], task.direction[0])
-            goal = task.position - rotation_from_rpy(0.0, 0.0, yaw) @ robot.centre
+            goal = task.position - rotation_from_rpy(0.0, pitch, yaw) @ robot.centre
             robot.route = Route(
                 [PoseTrajectory(estimate.position.copy(), estimate.yaw, goal, yaw, self._limits())]
             )
-            robot.goal = robot.route.at(robot.route.duration)
+            robot.goal = dataclasses.replace(robot.route.at(robot.route.duration), pitch=pitch)
+            robot.view = (np.asarray(task.position, float), np.asarray(task.direction, float))
             robot.route_start_s, robot.task_started_s, robot.task_key = now, now, key
             robot.within_since_s = None
             robot.activity = "fly"
@@ -759,14 +816,18 @@ class Mission:
                 robot.activity = "idle"  # done by another robot, or re-allocated
                 self.writer.event(now, "released", robot=robot.name, task=key)
                 return
-            goal = robot.goal
+            # the robot's own check, on its estimate: its camera at the viewpoint, looking along the view
             estimate = self._estimate(robot)
-            close = np.linalg.norm(estimate.position - goal.position) <= self.params.position_tolerance_m
-            aligned = abs(math.remainder(goal.yaw - estimate.yaw, 2 * math.pi)) <= math.radians(
-                self.params.yaw_tolerance_deg
+            rotation = rotation_from_rpy(*estimate.rpy)
+            believed = check_view(
+                estimate.position + rotation @ robot.centre,
+                rotation[:, 0],
+                *robot.view,
+                self.params.position_tolerance_m,
+                self.params.direction_tolerance_deg,
             )
             arrived = now - robot.route_start_s >= robot.route.duration
-            if arrived and close and aligned:
+            if arrived and believed.verified:
                 robot.within_since_s = robot.within_since_s if robot.within_since_s is not None else now
                 if now - robot.within_since_s >= self.params.dwell_s:
                     self._capture(robot, key, now)
@@ -784,14 +845,43 @@ class Mission:
         self._captures.append(self._gl.submit(self._draw_capture, self.sim.stereo_snapshot(robot.name), name))
         image = self.writer.image_path(name)
         truth = self._camera_pose(robot, "truth")
-        self.captured.append(np.r_[truth.position, truth.forward])
+        # the evaluation's judgement, on the true pose of the camera pair's centre (the robot never sees it)
+        body = self.sim.ground_truth(robot.name)
+        rotation = rotation_from_quaternion(body["quaternion"])
+        judged = check_view(
+            np.asarray(body["position"]) + rotation @ robot.centre,
+            rotation[:, 0],
+            *robot.view,
+            self.params.position_tolerance_m,
+            self.params.direction_tolerance_deg,
+        )
+        view = np.r_[truth.position, truth.forward]
+        if judged.verified:  # only views that show the task are scored
+            self.captured.append(view)
+            self.seen.look(view)
+        robot.claimed += 1
+        robot.verified += int(judged.verified)
         self.inspections[key] = self.inspections.get(key, 0) + 1
         self.auction.agents[robot.index].mark_done(key, now)
         record = self.tasks.setdefault(key, {"id": key})
-        record.update(completed=True, completion_time=round(now, 3), image=image, assigned_to=robot.name)
-        view = np.r_[truth.position, truth.forward]
-        self.seen.look(view)
-        self.writer.event(now, "done", robot=robot.name, task=key, image=image, view=view.tolist())
+        record.update(
+            completed=True,
+            verified=judged.verified,
+            completion_time=round(now, 3),
+            image=image,
+            assigned_to=robot.name,
+        )
+        self.writer.event(
+            now,
+            "done",
+            robot=robot.name,
+            task=key,
+            image=image,
+            view=view.tolist(),
+            verified=judged.verified,
+            position_error_m=round(judged.position_error_m, 4),
+            direction_error_deg=round(judged.direction_error_deg, 2),
+        )
         robot.activity = "idle"
 
     def _finished(self) -> bool:
@@ -812,7 +902,7 @@ class Mission:
         return 100.0 * float(self.seen.seen.mean())
 
     def captured_views(self) -> np.ndarray:
-        """The true camera viewpoints ``(N, 6)`` where task images were captured."""
+        """The true camera viewpoints ``(N, 6)`` of the verified task images (the ones scored)."""
         return np.array(self.captured).reshape(-1, 6)
 
     def document(self, now: float, wall_s: float, finished: bool) -> dict:
@@ -826,6 +916,10 @@ class Mission:
             "wall_time_s": wall_s,
             "robots": {r.name: r.activity for r in self.robots.values()},
             "inspected_pct": self.inspected_pct(),
+            # claimed: the robot said the task was done; verified: its true view was within tolerance
+            "done_by_robot": {
+                r.name: {"claimed": r.claimed, "verified": r.verified} for r in self.robots.values()
+            },
             "comms": {
                 "messages": stats.transmissions,
                 "bytes": stats.bytes,

@@ -29,7 +29,8 @@ FLIGHT_TESTS = [
     "tests/test_feedback.py",
     "tests/test_model_aided.py",
 ]
-TESTS_OF_GROUP = {"M": TESTS, "F": FLIGHT_TESTS}
+VERIFICATION_TESTS = ["tests/test_done_means_seen.py", "tests/test_mission.py"]
+TESTS_OF_GROUP = {"M": TESTS, "F": FLIGHT_TESTS, "V": VERIFICATION_TESTS}
 
 # id: (description, [(file, old, new), ...])
 MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
@@ -285,6 +286,59 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "controllers/mavlink_wire.py",
                 "    if not all(math.isfinite(v) for v in values):",
                 "    if not manual_control_in_range(*values) or not all(math.isfinite(v) for v in values):",
+            )
+        ],
+    ),
+    "V1": (
+        "the judgement of a capture ignores pitch (the angle of the horizontal directions only)",
+        [
+            (
+                "maptidal/mission/verification.py",
+                "    forward = np.asarray(camera_forward, float)\n"
+                "    direction = np.asarray(task_direction, float)\n",
+                "    forward = np.asarray(camera_forward, float) * [1, 1, 0]\n"
+                "    direction = np.asarray(task_direction, float) * [1, 1, 0]\n",
+            )
+        ],
+    ),
+    "V2": (
+        "unverified views are scored too",
+        [
+            (
+                "maptidal/mission/run.py",
+                "        if judged.verified:  # only views",
+                "        if True:  # only views",
+            )
+        ],
+    ),
+    "V3": (
+        "the robot's own check takes a level camera (it does not wait for the pitch)",
+        [
+            (
+                "maptidal/mission/run.py",
+                "                rotation[:, 0],\n                *robot.view,",
+                "                np.r_[rotation[:2, 0], 0.0] / np.linalg.norm(rotation[:2, 0]),\n"
+                "                *robot.view,",
+            )
+        ],
+    ),
+    "V4": (
+        "the pitch stick is never sent (the robot flies level)",
+        [
+            (
+                "maptidal/mission/run.py",
+                "                    if reference.pitch:",
+                "                    if False:",
+            )
+        ],
+    ),
+    "V5": (
+        "a view beyond the vehicle's pitch is flown anyway, not declined",
+        [
+            (
+                "maptidal/mission/verification.py",
+                "        return None\n",
+                "        return max(-cap, min(cap, pitch))\n",
             )
         ],
     ),
