@@ -48,6 +48,7 @@ from maptidal.baselines import (
 )
 from maptidal.coverage import CoverageModel, CoverageParams
 from maptidal.evaluation import PAPER_TABLE
+from maptidal.files import save_png
 from maptidal.paths import asset
 from maptidal.tank import TankConfigError, TankModel, tank_config_from_dict
 
@@ -401,5 +402,4 @@ def plot_calibration(result: CalibrationResult, path) -> None:
         axis.set_visible(False)
     figure.suptitle("Tank calibration: every tank evaluated (red: best fit and its determined range)")
     figure.tight_layout()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_png(figure, path)

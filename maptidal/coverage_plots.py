@@ -3,7 +3,6 @@ and heatmaps of a parameter sweep (the layout of Table I)."""
 
 from __future__ import annotations
 
-import io
 import os
 
 import matplotlib
@@ -14,7 +13,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from maptidal.coverage import CoverageReport
-from maptidal.files import atomic_write_bytes
+from maptidal.files import save_png
 from maptidal.tank import TankModel
 
 METHOD_COLOURS = {
@@ -26,10 +25,7 @@ METHOD_COLOURS = {
 
 
 def _save(figure, path: str | os.PathLike) -> None:
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=110)
-    plt.close(figure)
-    atomic_write_bytes(path, buffer.getvalue())
+    save_png(figure, path)
 
 
 def plot_histograms(reports: dict[str, CoverageReport], path: str | os.PathLike, title: str = "") -> None:

@@ -21,8 +21,23 @@ from maptidal.discovery import DiscoveryInputError, validate_mesh, validate_view
 MESH_SUFFIXES = (".ply", ".obj", ".stl")
 
 
+def _process_umask() -> int:
+    """The process's umask, read without changing it where Linux tells it (os.umask can only be read by
+    setting it, which would race with threads creating files)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically, creating parent folders."""
+    """Write ``data`` to ``path`` atomically, creating parent folders. The file gets the mode a plain
+    ``open`` would give it (0666 less the umask), not mkstemp's private 0600."""
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -30,6 +45,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     except OSError as err:  # name the file the caller asked for, not a folder or temporary name
         raise type(err)(err.errno, err.strerror, str(path)) from None
     try:
+        os.fchmod(handle, 0o666 & ~_process_umask())
         with os.fdopen(handle, "wb") as stream:
             stream.write(data)
             stream.flush()
@@ -44,6 +60,18 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
     """Write UTF-8 ``text`` to ``path`` atomically."""
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def save_png(figure, path: str | os.PathLike, dpi: int = 110) -> Path:
+    """Save a matplotlib ``figure`` as a PNG at ``path`` atomically, and close it."""
+    import io
+
+    import matplotlib.pyplot as plt
+
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=dpi)
+    plt.close(figure)
+    return atomic_write_bytes(path, buffer.getvalue())
 
 
 def atomic_write_json(path: str | os.PathLike, document: object) -> Path:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io
 import os
 from pathlib import Path
 
@@ -15,7 +14,7 @@ import numpy as np
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from maptidal.discovery import DiscoveryResult
-from maptidal.files import atomic_write_bytes
+from maptidal.files import save_png
 
 ARROW_LENGTH_M = 0.3
 
@@ -95,7 +94,4 @@ def plot_discovery(
         axes.legend(loc="upper left", fontsize=8)
     figure.suptitle(title)
     figure.subplots_adjust(left=0.02, right=0.96, bottom=0.04, top=0.9, wspace=0.08)
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=110)
-    plt.close(figure)
-    return atomic_write_bytes(path, buffer.getvalue())
+    return save_png(figure, path)

@@ -64,6 +64,7 @@ CASES = [
     ("axis twice", "sim --command surge=1,surge=-1 --duration 0.1", "given twice"),
     ("unknown axis", "sim --command warp=1 --duration 0.1", "unknown command axis"),
     ("sweep jobs 0", "sweep --jobs 0 --out {root}/sweep0", "must be at least 1"),
+    ("endless mission", "run --duration 1e12 --out {root}/endless", "at most 86400 s"),
     ("unknown subcommand", "fly", "invalid choice"),
     ("missing mesh", "discover {root}/missing.ply", "not found"),
 ]

@@ -101,3 +101,14 @@ def test_bad_tolerances_are_refused():
     ):
         with pytest.raises(ValueError, match="direction_tolerance_deg"):
             MissionParams(**bad)
+
+
+def test_a_mission_refuses_an_endless_duration_and_events_after_its_end():
+    from maptidal.mission.run import MissionEvent
+
+    with pytest.raises(ValueError, match="at most 86400 s"):
+        MissionParams(duration_s=1e12)
+    late = MissionEvent(1e9, "current", current=(0.1, 0.0, 0.0))
+    with pytest.raises(ValueError, match="after the mission's end"):
+        MissionParams(duration_s=10.0, events=(late,))
+    MissionParams(duration_s=10.0, events=(MissionEvent(5.0, "current", current=(0.1, 0.0, 0.0)),))

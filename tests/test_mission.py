@@ -381,7 +381,7 @@ def test_a_link_outage_drops_every_message_in_its_window(tmp_path):
     assert stats.link_down == inside == document["comms"]["link_down"]
     assert stats.delivered == stats.transmissions - inside - stats.lost - stats.out_of_range
     pair = MissionParams(
-        duration_s=1.0, events=(MissionEvent(3.0, "outage", duration_s=2.0, robots=("rov1", "rov0")),)
+        duration_s=6.0, events=(MissionEvent(3.0, "outage", duration_s=2.0, robots=("rov1", "rov0")),)
     )
     assert Mission(scenario, pair, tmp_path / "pair").auction.channel.params.outages == (
         Outage(3.0, 5.0, (1, 0)),

@@ -65,14 +65,12 @@ def plot_allocation(
     simulation: AuctionSimulation, report: AuctionReport, summary: dict, path: str | Path
 ) -> Path:
     """Top and side views of robots, tasks and each robot's path; written atomically as PNG."""
-    import io
-
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from maptidal.files import atomic_write_bytes
+    from maptidal.files import save_png
 
     figure, axes = plt.subplots(1, 2, figsize=(13, 5.5), gridspec_kw={"width_ratios": [3, 2]})
     colours = plt.get_cmap("tab10")
@@ -117,7 +115,4 @@ def plot_allocation(
         fontsize=10,
     )
     figure.tight_layout()
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=110)
-    plt.close(figure)
-    return atomic_write_bytes(path, buffer.getvalue())
+    return save_png(figure, path)

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from maptidal.executors import run_jobs
-from maptidal.files import atomic_write_json, atomic_write_text
+from maptidal.files import atomic_write_json, atomic_write_text, save_png
 from maptidal.mission.outputs import mission_metrics
 from maptidal.progress import ProgressBar
 
@@ -159,8 +159,7 @@ def plot_batch(rows: list[dict], path: Path) -> None:
         axis.tick_params(labelsize=8)
     figure.suptitle(f"Map-TIDAL missions over {len(rows)} seeds (line: mean, band: one std)")
     figure.tight_layout()
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    save_png(figure, path)
 
 
 def run_batch(

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from maptidal.files import atomic_write_bytes, atomic_write_json, atomic_write_text
+from maptidal.files import atomic_write_bytes, atomic_write_json, atomic_write_text, save_png
 
 EVENTS = "events.jsonl"
 TRAJECTORIES = "trajectories.csv"
@@ -149,8 +149,7 @@ def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: t
     if axis.get_legend_handles_labels()[0]:  # a mission cut short may have no path drawn yet
         axis.legend(fontsize=7, loc="lower left")
     figure.tight_layout()
-    figure.savefig(root / "top_view.png", dpi=110)
-    plt.close(figure)
+    save_png(figure, root / "top_view.png")
 
     if occluded is not None:
         model, report, per_voxel = occluded
@@ -187,8 +186,7 @@ def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: t
     axis.set_title("Tasks found, allocated and done per robot (red line: a failure)")
     axis.legend(fontsize=7)
     figure.tight_layout()
-    figure.savefig(root / "timeline.png", dpi=110)
-    plt.close(figure)
+    save_png(figure, root / "timeline.png")
 
 
 def _trajectory_rows(root: Path) -> np.ndarray:

@@ -106,6 +106,9 @@ class MissionEvent:
                 raise ValueError(f"an outage takes down all links, or the link of two robots: {self.robots}")
 
 
+MAX_DURATION_S = 86400.0  # a day of simulated time: longer than any battery a BlueROV2 carries
+
+
 @dataclass(frozen=True)
 class MissionParams:
     """How the mission runs (module docstring). Images are rendered at ``image_size`` (width, height) with
@@ -174,8 +177,16 @@ class MissionParams:
     video_playback_fps: float = 20.0
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.duration_s) and self.duration_s > 0):
-            raise ValueError(f"duration must be positive, got {self.duration_s!r}")
+        if not (math.isfinite(self.duration_s) and 0 < self.duration_s <= MAX_DURATION_S):
+            raise ValueError(
+                f"duration must be positive and at most {MAX_DURATION_S:g} s (a day), got {self.duration_s!r}"
+            )
+        late = [e for e in self.events if e.time_s > self.duration_s]
+        if late:
+            raise ValueError(
+                f"a {late[0].kind} event at {late[0].time_s:g} s falls after the mission's end "
+                f"({self.duration_s:g} s)"
+            )
         if self.pose_source not in POSE_SOURCES:
             raise ValueError(f"pose source must be one of {POSE_SOURCES}, got {self.pose_source!r}")
         if not (
