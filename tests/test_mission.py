@@ -191,6 +191,21 @@ def test_a_rebuilt_report_names_only_the_images_on_disk(short_mission, tmp_path)
     assert all(images[e["task"]] == e["image"] and (out / e["image"]).is_file() for e in done[1:])
 
 
+def test_a_report_never_invents_figures_and_names_the_file_it_cannot_read(short_mission, tmp_path):
+    out = tmp_path / "mission"
+    shutil.copytree(short_mission[2], out)
+    (out / "mission.json").unlink()  # no snapshot: the comms figures are not known
+    assert run_maptidal("report", out).returncode == 0
+    report = (out / "report.md").read_text()
+    assert "Comms: unknown" in report and "| messages / bytes / lost | unknown |" in report
+    events = out / "events.jsonl"
+    lines = events.read_text().splitlines()
+    events.write_text("\n".join([lines[0], '{"t": 1.0, "robot": "rov0"}', *lines[1:]]) + "\n")
+    assert_one_line_error(run_maptidal("report", out), "events.jsonl, line 2: an event needs a 'kind'")
+    events.write_text("")
+    assert_one_line_error(run_maptidal("report", out), "the event log is empty")
+
+
 @pytest.mark.parametrize("write", ["snapshot", "final"])
 def test_mission_json_waits_for_the_task_images_it_names(monkeypatch, tmp_path, write):
     # a task's image is drawn and written on the GL thread after its "done": hold one back, and neither

@@ -14,6 +14,7 @@ from the log (``maptidal report DIR``).
 from __future__ import annotations
 
 import json
+import math
 from collections import Counter
 from pathlib import Path
 
@@ -96,13 +97,23 @@ def coverage_of(views: np.ndarray, tank) -> tuple[dict, tuple | None]:
 
 
 def read_events(root) -> list[dict]:
-    """The event log's events (a cut last line, from a killed mission, is skipped)."""
+    """The event log's events (a cut last line, from a killed mission, is skipped). An event that is not
+    an object with a ``kind`` and a finite time ``t`` raises ValueError naming the file and the line."""
+    path = Path(root) / EVENTS
+    lines = path.read_text(encoding="utf-8").splitlines()
     events = []
-    for line in (Path(root) / EVENTS).read_text(encoding="utf-8").splitlines():
+    for number, line in enumerate(lines, start=1):
         try:
-            events.append(json.loads(line))
+            event = json.loads(line)
         except json.JSONDecodeError:
-            continue
+            if number == len(lines):
+                continue  # the line a killed mission was writing
+            raise ValueError(f"{path}, line {number}: not JSON") from None
+        t = event.get("t") if isinstance(event, dict) else None
+        valid_time = isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t)
+        if not (isinstance(event, dict) and isinstance(event.get("kind"), str) and valid_time):
+            raise ValueError(f"{path}, line {number}: an event needs a 'kind' and a finite time 't'")
+        events.append(event)
     return events
 
 
@@ -214,7 +225,7 @@ def mission_metrics(document: dict) -> dict:
     ``maptidal batch`` aggregates, and the summary table shows)."""
     tasks = document.get("tasks", [])
     coverage = document.get("coverage", {}).get("occluded", {})
-    comms = document.get("comms", {})
+    comms = document.get("comms")  # None: unknown (a log rebuilt without a readable snapshot)
     return {
         "finished": bool(document.get("finished")),
         "tasks_found": len(tasks),
@@ -225,9 +236,9 @@ def mission_metrics(document: dict) -> dict:
         "mean_views": float(coverage.get("mean_views", 0.0)),
         "mad": coverage.get("mad"),  # None without captured views
         "completion_time_s": float(document.get("sim_time_s", 0.0)),
-        "messages": int(comms.get("messages", 0)),
-        "bytes": int(comms.get("bytes", 0)),
-        "lost": int(comms.get("lost", 0)),
+        "messages": None if comms is None else int(comms.get("messages", 0)),
+        "bytes": None if comms is None else int(comms.get("bytes", 0)),
+        "lost": None if comms is None else int(comms.get("lost", 0)),
         "realtime_factor": document.get("realtime_factor"),
         "wall_time_s": document.get("wall_time_s"),
     }
@@ -244,7 +255,11 @@ def report_markdown(document: dict) -> str:
         f"Tasks: {m['tasks_found']} found, {m['tasks_done']} said done by the robots, {m['tasks_verified']} "
         "of them verified (the true view of the capture within the task's tolerances). Coverage of the "
         f"verified views (occlusion on): {m['pct_uninspected']:.1f} % of the walls uninspected. Comms: "
-        f"{m['messages']} messages, {m['bytes']} bytes, {m['lost']} lost.",
+        + (
+            "unknown (no readable mission.json snapshot)."
+            if m["messages"] is None
+            else f"{m['messages']} messages, {m['bytes']} bytes, {m['lost']} lost."
+        ),
         "",
         *verification_lines(document),
         *timing_lines(document),
@@ -317,7 +332,10 @@ def summary_table(document: dict) -> str:
         # a snapshot of the auction, not a fault: on a slow channel two bundles may hold a task for a while
         ("tasks in two bundles at the end", str(document.get("allocation_conflicts", "n/a"))),
         ("walls uninspected (occluded)", f"{m['pct_uninspected']:.1f} %"),
-        ("messages / bytes / lost", f"{m['messages']} / {m['bytes']} / {m['lost']}"),
+        (
+            "messages / bytes / lost",
+            "unknown" if m["messages"] is None else f"{m['messages']} / {m['bytes']} / {m['lost']}",
+        ),
     ]
     return "\n".join(["| figure | value |", "|---|---|", *(f"| {a} | {b} |" for a, b in rows)])
 
@@ -329,6 +347,8 @@ def rebuild(root, tank) -> dict:
     if not (root / EVENTS).is_file():
         raise ValueError(f"{root}: no {EVENTS}; is this a mission folder?")
     events = read_events(root)
+    if not events:
+        raise ValueError(f"{root / EVENTS}: the event log is empty; nothing to report")
     snapshot = {}
     if (root / "mission.json").is_file():
         try:
