@@ -44,6 +44,8 @@ class FrameDiscovery:
     mesh_error_median_m: float | None
     mesh_error_by_observations: list[dict]
     ate_m: float | None
+    mesh_error_p90_m: float | None = None  # the tail the median leaves out
+    mesh_error_max_m: float | None = None
 
     def counts(self) -> dict[str, int]:
         """Discovery's stage counts summed over the keyframes (CIPs, after pruning, confirmed, final)."""
@@ -59,6 +61,8 @@ class FrameDiscovery:
             "keypoints_per_keyframe": [len(k.pixels) for k in self.run.keyframes],
             "mesh_faces": int(sum(len(k.keyframe.mesh.faces) for k in self.run.keyframes)),
             "mesh_error_median_m": self.mesh_error_median_m,
+            "mesh_error_p90_m": self.mesh_error_p90_m,
+            "mesh_error_max_m": self.mesh_error_max_m,
             "mesh_error_by_observations": self.mesh_error_by_observations,
             "ate_m": self.ate_m,
             "rejected_observations": self.run.rejected_observations,
@@ -97,13 +101,14 @@ def discover_on_recording(
         total = frame.get("total_tasks", before)
         new_tasks.append(outcome.tasks[before:total])
         before = total
-    error_median, by_observations = None, []
+    error_median, error_p90, error_max, by_observations = None, None, None, []
     surface = true_surface(recording)
     if surface is not None and run.keyframes:
         errors = np.concatenate([surface_distances(k.keyframe.mesh.vertices, surface) for k in run.keyframes])
         observations = np.concatenate([k.observations for k in run.keyframes])
         if len(errors):
             error_median = float(np.median(errors))
+            error_p90, error_max = float(np.percentile(errors, 90)), float(errors.max())
         for low, high in OBSERVATION_BINS:
             members = (observations >= low) & (observations <= high)
             if members.any():
@@ -121,7 +126,16 @@ def discover_on_recording(
         truth = [recording.frames[n].poses["truth"] for n in range(len(run.frames))]
         ate = absolute_trajectory_error([record.pose for record in run.frames], truth)
     return FrameDiscovery(
-        run, outcome.tasks, outcome.frames, new_tasks, outcome.results, error_median, by_observations, ate
+        run,
+        outcome.tasks,
+        outcome.frames,
+        new_tasks,
+        outcome.results,
+        error_median,
+        by_observations,
+        ate,
+        error_p90,
+        error_max,
     )
 
 

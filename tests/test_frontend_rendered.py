@@ -53,6 +53,10 @@ def test_the_capture_rises_half_a_metre_facing_the_end_wall(clear_recording):
 def test_the_mesh_lies_within_3_cm_of_the_true_surface_in_clear_water(truth_run):
     assert len(truth_run.run.keyframes) == 7
     assert truth_run.mesh_error_median_m is not None and truth_run.mesh_error_median_m < 0.03
+    # the tails are reported beside the median, and ordered
+    assert truth_run.mesh_error_median_m <= truth_run.mesh_error_p90_m <= truth_run.mesh_error_max_m
+    document = truth_run.to_json()
+    assert document["mesh_error_p90_m"] == truth_run.mesh_error_p90_m
     assert all(len(k.keyframe.mesh.faces) > 50 for k in truth_run.run.keyframes)
 
 

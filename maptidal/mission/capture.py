@@ -33,6 +33,7 @@ from controllers.trajectory import Hold, MotionLimits, PoseTrajectory, Route
 from envs.scenario import Scenario, load_scenario
 from envs.simulation import Simulation
 from envs.world import camera_offsets
+from maptidal.camera import StereoCameraParams
 from maptidal.files import save_mesh
 from maptidal.keyframes import ExplorationParams, PaperCaptureParams
 from maptidal.perception.recording import (
@@ -118,13 +119,14 @@ def capture(
     robot: str | None = None,
     progress: Callable[[float, float], None] | None = None,
     water_backend: str = "auto",
+    camera: StereoCameraParams | None = None,
 ) -> Recording:
     """Fly ``params.path`` in ``scenario`` and write the recording to ``out_dir``; returns it loaded.
     ``water_backend`` is :class:`envs.simulation.Simulation`'s (``"cpu"`` gives the same pixels on every
-    machine)."""
+    machine); ``camera`` the stereo pair (default: the OAK-D at 640x400; the mission draws 320x200)."""
     params = params or CaptureParams()
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    sim = Simulation(scenario, flight_mode="stabilize", water_backend=water_backend)
+    sim = Simulation(scenario, camera=camera, flight_mode="stabilize", water_backend=water_backend)
     try:
         return _fly(sim, Path(out_dir), params, seed, robot or sim.robots[0], progress)
     finally:

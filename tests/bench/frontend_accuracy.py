@@ -24,6 +24,7 @@ import matplotlib.pyplot as plt
 
 from envs.scenario import load_scenario
 from envs.water import WaterParams
+from maptidal.camera import StereoCameraParams
 from maptidal.frame_discovery import discover_on_recording
 from maptidal.keyframes import PaperCaptureParams
 from maptidal.mission.capture import CaptureParams, capture
@@ -32,8 +33,10 @@ from maptidal.perception.frontend import FrontEndParams
 SOURCES = ("truth", "dr", "vo")
 
 
-def _run(scratch: Path, tag: str, scenario, params: CaptureParams, keyframes: int | None) -> dict:
-    recording = capture(scratch / tag, scenario, params, seed=0)
+def _run(
+    scratch: Path, tag: str, scenario, params: CaptureParams, keyframes: int | None, camera=None
+) -> dict:
+    recording = capture(scratch / tag, scenario, params, seed=0, camera=camera)
     results = {}
     for source in SOURCES:
         results[source] = discover_on_recording(recording, source, FrontEndParams(max_keyframes=keyframes))
@@ -94,6 +97,24 @@ def main() -> None:
                 ates = [100 * results[s].ate_m for s in ("dr", "vo")]
                 name = "Heavy with DVL" if dvl else "Heavy without DVL"
                 print(f"| {path} | {name} | {frames} | {ates[0]:.2f} | {ates[1]:.2f} |")
+        # the tails, and at the mission's own image size (maptidal.mission.run.MissionParams.image_size)
+        print("\nMesh error median / p90 / max (mm), default water, by image size:\n")
+        print("| image | range | truth | dr | vo |\n|---|---|---|---|---|")
+        default = dataclasses.replace(base, water=WaterParams(turbidity=0.3, noise_sigma=2.0, vignetting=0.2))
+        for width, height in ((640, 400), (320, 200)):
+            for distance in (1.0, 2.0):
+                paper = PaperCaptureParams(distance_from_end_wall_m=distance)
+                params = CaptureParams(path="paper", paper=paper)
+                camera = StereoCameraParams(width=width, height=height)
+                results = _run(scratch, f"tail{width}{distance}", default, params, 7, camera)
+                cells = [
+                    " / ".join(
+                        f"{1000 * v:.1f}"
+                        for v in (r.mesh_error_median_m, r.mesh_error_p90_m, r.mesh_error_max_m)
+                    )
+                    for r in (results[s] for s in SOURCES)
+                ]
+                print(f"| {width}x{height} | {distance:g} m | {' | '.join(cells)} |", flush=True)
     print("\nMesh error by fused observations (default water, 1 m, truth):\n")
     print("| observations | vertices | median error (mm) |\n|---|---|---|")
     for row in by_observations:
