@@ -37,7 +37,7 @@ import mujoco
 import numpy as np
 
 from controllers.convention import pilot_command
-from controllers.estimation import DeadReckoning, EstimatorParams, StateEstimate
+from controllers.estimation import DeadReckoning, EstimatorParams, StateEstimate, rpy_from_rotation
 from controllers.flight_modes import FLIGHT_MODES, FlightController, ModeParams
 from controllers.mixing import MixerParams, mix
 from controllers.pose import VehicleModel
@@ -631,9 +631,6 @@ class _Autopilot:
 
 
 def rpy_from_matrix(rotation: np.ndarray) -> tuple[float, float, float]:
-    """Roll, pitch, yaw (rad; ZYX about the world axes, z up) from a body-to-world rotation."""
-    R = np.asarray(rotation)
-    pitch = -math.asin(max(-1.0, min(1.0, R[2, 0])))
-    roll = math.atan2(R[2, 1], R[2, 2])
-    yaw = math.atan2(R[1, 0], R[0, 0])
-    return roll, pitch, yaw
+    """Roll, pitch, yaw (rad; ZYX about the world axes, z up) from a body-to-world rotation (the
+    estimator's own conversion, :func:`controllers.estimation.rpy_from_rotation`)."""
+    return rpy_from_rotation(np.asarray(rotation))
