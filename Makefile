@@ -44,6 +44,7 @@ bench: setup
 	$(BIN)/python tests/bench/bench_allocation.py
 	$(BIN)/python tests/bench/bench_gym.py
 	$(BIN)/python tests/bench/bench_frontend.py
+	$(BIN)/python tests/bench/bench_relocalisation.py
 	$(BIN)/python tests/bench/bench_mission.py
 
 # regenerate the front end's golden frames and outputs (tests/data/golden_frames) on purpose; prints what changed

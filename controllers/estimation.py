@@ -128,6 +128,20 @@ class MotionModel:
         mass, linear, quadratic = self._arrays
         return (mass * v + dt * force) / (mass + dt * (linear + quadratic * np.abs(v)))
 
+    def perturbed(self, fraction: float) -> MotionModel:
+        """This model with its coefficients off by ``fraction`` the way that misleads most: the inertia
+        ``fraction`` too large, both dampings and the net buoyancy ``fraction`` too small (the estimator
+        of a vehicle whose coefficients are known only so well; ``fraction`` in [0, 1))."""
+        if not (0.0 <= fraction < 1.0):
+            raise ValueError(f"a motion model's error must be in [0, 1), got {fraction!r}")
+        more, less = 1.0 + fraction, 1.0 - fraction
+        return MotionModel(
+            inertia=tuple(more * v for v in self.inertia),
+            linear_damping=tuple(less * v for v in self.linear_damping),
+            quadratic_damping=tuple(less * v for v in self.quadratic_damping),
+            net_buoyancy_n=less * self.net_buoyancy_n,
+        )
+
     @functools.cached_property
     def _arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         # the coefficients as arrays once: step runs every control period

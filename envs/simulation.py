@@ -125,8 +125,14 @@ class Simulation:
         flight_mode: str = "manual",
         mode_params: ModeParams | None = None,
         render_samples: int = 4,
+        motion_model_error: float = 0.0,
     ) -> None:
         check_render_samples(render_samples)
+        if not (math.isfinite(motion_model_error) and 0.0 <= motion_model_error < 1.0):
+            raise ValueError(f"motion_model_error must be in [0, 1), got {motion_model_error!r}")
+        # how far off the coefficients of the estimators' motion models are (MotionModel.perturbed): 0,
+        # the simulator's own, is the best a vehicle's owner can hope for
+        self.motion_model_error = motion_model_error
         self.mode_params = mode_params or ModeParams()
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         self.camera = camera or StereoCameraParams()
@@ -308,7 +314,7 @@ class Simulation:
             self.scenario.tank.height,
             DEPTH_SENSOR_POSITION,
             spec.vehicle.sensors.dvl_position,
-            motion_model=self._vehicle_models[robot].motion_model(),
+            motion_model=self._vehicle_models[robot].motion_model().perturbed(self.motion_model_error),
         )
         self._estimators[robot] = DeadReckoning(params, truth["position"], truth["rpy"][2])
         self._update_estimate(robot)

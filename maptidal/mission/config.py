@@ -4,6 +4,9 @@
     duration_s = 180
     pose_source = "vo"     # what the front end meshes on: truth, dr or vo
     frame_rate_hz = 1.0    # stereo frames per robot per second
+    frame_rate_no_dvl_hz = 1.0  # ... of a robot without a DVL
+    motion_model_error = 0.0    # how far off the estimators' motion models are (0: exact, 0.3: 30 %)
+    relocalise = true      # a robot without a DVL relocalises against its own map (false: it does not)
     command_rate_hz = 10.0 # go-to-pose's pilot commands per second
     clearance_m = 1.0      # how far a robot keeps from lower-indexed teammates (0: not at all)
     render_samples = 4     # the images' anti-aliasing samples (0: off, about twice as fast on a CPU)
@@ -44,6 +47,9 @@ MISSION_KEYS = {
     "events",
     "pose_source",
     "frame_rate_hz",
+    "frame_rate_no_dvl_hz",
+    "motion_model_error",
+    "relocalise",
     "command_rate_hz",
     "clearance_m",
     "render_samples",
@@ -56,6 +62,7 @@ SETTING_TYPES: dict[str, type] = {
     "water_backend": str,
     "render_samples": int,
     "perception_process": bool,
+    "relocalise": bool,
 }
 EVENT_KEYS = {"time_s", "kind", "robot", "current", "duration_s", "robots"}
 

@@ -4,7 +4,8 @@
 - ``trajectories.csv``: per frame, each robot's true and estimated position;
 - ``images/``: the image captured at each task;
 - ``mission.json``: an atomic snapshot every few simulated seconds, and the final document;
-- at the end: ``top_view.png``, ``histogram.png``, ``voxel_views.png``, ``timeline.png`` and ``report.md``.
+- at the end: ``top_view.png``, ``histogram.png``, ``voxel_views.png``, ``timeline.png``,
+  ``localisation.png`` and ``report.md``.
 
 A mission killed midway leaves a readable ``events.jsonl`` (at worst its last line cut, which is
 skipped) and its last snapshot; :func:`rebuild` makes ``mission.json``, the plots and ``report.md`` again
@@ -72,6 +73,7 @@ class MissionWriter:
         self._events.close()
         self._trajectories.close()
         document["coverage"], occluded = coverage_of(views, tank)
+        document["localisation"] = localisation_errors(self.root, list(document.get("robots", {})))
         atomic_write_json(self.root / "mission.json", document)
         write_plots(self.root, document, views, tank, occluded)
         atomic_write_text(self.root / "report.md", report_markdown(document))
@@ -199,6 +201,58 @@ def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: t
     figure.tight_layout()
     save_png(figure, root / "timeline.png")
 
+    figure, axis = plt.subplots(figsize=(8, 3))
+    for name in robots:
+        mine = rows[rows[:, 0] == robots.index(name)] if len(rows) else rows
+        if len(mine):
+            error = np.hypot(mine[:, 2] - mine[:, 5], mine[:, 3] - mine[:, 6])
+            axis.plot(mine[:, 1], 100.0 * error, color=colour_of[name], lw=1, label=name)
+    axis.set_xlabel("simulated time (s)")
+    axis.set_ylabel("horizontal error (cm)")
+    axis.set_title("Localisation: the estimate each robot flies on against the truth")
+    if axis.get_legend_handles_labels()[0]:
+        axis.legend(fontsize=7)
+    figure.tight_layout()
+    save_png(figure, root / "localisation.png")
+
+
+def localisation_errors(root, robots: list[str]) -> dict:
+    """Each robot's horizontal localisation error (m) over the mission, from ``trajectories.csv``'s true
+    and estimated positions (what the robot flew on): the root mean square (the absolute trajectory
+    error, unaligned: every estimate starts at the true pose), median, 90th percentile, maximum and
+    final. A robot with no row is left out."""
+    rows = _trajectory_rows(Path(root))
+    out = {}
+    for k, name in enumerate(robots):
+        mine = rows[rows[:, 0] == k] if len(rows) else rows
+        if not len(mine):
+            continue
+        error = np.hypot(mine[:, 2] - mine[:, 5], mine[:, 3] - mine[:, 6])
+        out[name] = {
+            "ate_m": float(np.sqrt(np.mean(error**2))),
+            "median_m": float(np.median(error)),
+            "p90_m": float(np.percentile(error, 90)),
+            "max_m": float(error.max()),
+            "final_m": float(error[-1]),
+        }
+    return out
+
+
+def localisation_lines(document: dict) -> list[str]:
+    """``report.md``'s table of each robot's horizontal localisation error (``mission.json``'s
+    ``localisation``); none for a document without it."""
+    errors = document.get("localisation")
+    if not errors:
+        return []
+    rows = ["| robot | ATE (RMS) | median | p90 | max | final |", "|---|---|---|---|---|---|"]
+    for name, e in errors.items():
+        cells = " | ".join(
+            f"{100 * e[key]:.1f} cm" for key in ("ate_m", "median_m", "p90_m", "max_m", "final_m")
+        )
+        rows.append(f"| {name} | {cells} |")
+    note = "Horizontal error of the estimate each robot flew on, against the truth."
+    return ["## Localisation", "", note, "", *rows, "", "![localisation](localisation.png)", ""]
+
 
 def _trajectory_rows(root: Path) -> np.ndarray:
     """trajectories.csv as rows (robot index, time, true xyz, estimated xyz, yaw)."""
@@ -262,6 +316,7 @@ def report_markdown(document: dict) -> str:
         ),
         "",
         *verification_lines(document),
+        *localisation_lines(document),
         *timing_lines(document),
         "![top view](top_view.png)",
         "",
@@ -408,6 +463,7 @@ def rebuild(root, tank) -> dict:
     }
     views_array = np.array(views).reshape(-1, 6)
     document["coverage"], occluded = coverage_of(views_array, tank)
+    document["localisation"] = localisation_errors(root, list(document["robots"]))
     atomic_write_json(root / "mission.json", document)
     write_plots(root, document, views_array, tank, occluded)
     atomic_write_text(root / "report.md", report_markdown(document))

@@ -50,13 +50,15 @@ class FrameJob:
 @dataclass(frozen=True)
 class FrameResult:
     """What a frame gave: the horizontal offset ``xy_correction`` of the visual pose from the dead
-    reckoning (None unless the pose source is ``vo``), the front end's count of visual fixes so far, the
+    reckoning and that pose's horizontal standard deviation ``position_sigma_m`` (both None unless the
+    pose source is ``vo``), the front end's count of visual fixes so far, the
     keyframe mesh's face count (0 when the frame made no keyframe, or an empty mesh), the new tasks ``(M,
     6)`` discovery found on it, and the seconds spent in the front end and in discovery."""
 
     robot: str
     time_s: float
     xy_correction: np.ndarray | None
+    position_sigma_m: float | None
     visual_updates: int
     faces: int
     new_tasks: np.ndarray
@@ -68,9 +70,10 @@ def perceive(front: FrontEnd, job: FrameJob, discovery: DiscoveryParams) -> Fram
     """Run ``front`` on ``job``'s frame and, at a keyframe, discovery on its mesh."""
     start = time.perf_counter()
     record, keyframe = front.process(0, job.time_s, job.left, job.right, job.pose)
-    correction = None
+    correction, sigma = None, None
     if front.pose_source == "vo":
         correction = (record.pose.position - job.dead_reckoned.position)[:2]
+        sigma = front.odometry.sigma_m
     perception_s = time.perf_counter() - start
     faces, new = 0, np.zeros((0, 6))
     if keyframe is not None and len(keyframe.keyframe.mesh.faces):
@@ -88,7 +91,8 @@ def perceive(front: FrontEnd, job: FrameJob, discovery: DiscoveryParams) -> Fram
         job.robot,
         job.time_s,
         correction,
-        front.odometry.visual_updates,
+        sigma,
+        front.odometry.visual_updates + front.odometry.fixes,
         faces,
         new,
         perception_s,

@@ -1,21 +1,24 @@
 """The closed-loop Map-TIDAL mission (issue [mission]; the paper's Fig. 2 in our world): robots see, map,
 discover tasks, auction them over the acoustic channel, fly to them and inspect them.
 
-Each live robot's go-to-pose controller flies its current activity on its own estimate, streaming
-pilot commands at ``command_rate_hz`` (10 Hz) to the robot's flight mode, which runs every control period
-(the scenario's, 50 Hz) as the physics steps. The estimate is the robot's dead reckoning; a robot
-without a DVL has its horizontal position corrected by its front end's visual odometry (``vo``), and
-when no visual fix has come for ``lost_after_s`` it holds depth and heading rather than chase a goal it
-cannot tell it has reached. Every ``1 / frame_rate_hz`` seconds each
-robot renders its stereo pair and its front end (:mod:`maptidal.perception.frontend`) tracks, fuses and,
-at a keyframe, meshes; discovery (:func:`maptidal.discovery.discover`) runs on the mesh with every task
-the robot knows as existing tasks, and each new task it can reach is minted into its CBBA agent. That
-work runs in a process of its own beside the loop (:mod:`maptidal.mission.perception`), and the mission
-takes a frame's answer (the visual fix and the new tasks) at the robot's next frame: a one-frame latency,
-the same whether the worker runs apart or inline, so the mission does not depend on which. The
-agents (:class:`maptidal.allocation.auction.AuctionSimulation`) exchange only their binary messages over
-the acoustic channel, in TDMA slots, in step with the physics. A robot explores first (a yaw sweep where
-it starts), then flies the first task on its CBBA path, pitching into the view where it can, holds it for
+Each live robot's go-to-pose controller flies its current activity on its own estimate, streaming pilot
+commands at ``command_rate_hz`` (10 Hz) to the robot's flight mode, which runs every control period (the
+scenario's, 50 Hz) as the physics steps. The estimate is the robot's dead reckoning (DVL, or without one
+the motion model), its horizontal position corrected by its front end (``vo``: visual odometry and
+relocalisation against its own map, weighed against the dead reckoning). A robot without a DVL that has
+had no visual fix for ``lost_after_s``, or is unsure of its position past ``lost_sigma_m``, goes back, on
+its dead reckoning, to where it explored from, turns to the heading it explored along, the view its map
+knows best, and sweeps it, rather than chase a goal it cannot tell it has reached. Every
+``1 / frame_rate_hz`` seconds each robot renders its stereo pair and its front end
+(:mod:`maptidal.perception.frontend`) tracks, fuses and, at a keyframe, meshes; discovery
+(:func:`maptidal.discovery.discover`) runs on the mesh with every task the robot knows as existing tasks,
+and each new task it can reach is minted into its CBBA agent. That work runs in a process of its own
+beside the loop (:mod:`maptidal.mission.perception`), and the mission takes a frame's answer (the visual
+fix and the new tasks) at the robot's next frame: a one-frame latency, the same whether the worker runs
+apart or inline, so the mission does not depend on which. The agents
+(:class:`maptidal.allocation.auction.AuctionSimulation`) exchange only their binary messages over the
+acoustic channel, in TDMA slots, in step with the physics. A robot explores first (a yaw sweep where it
+starts), then flies the first task on its CBBA path, pitching into the view where it can, holds it for
 ``dwell_s`` with its camera, by its own estimate, within ``position_tolerance_m`` and
 ``direction_tolerance_deg`` of the view, captures an image and marks the task done, which spreads over
 the channel too. The capture is judged on the true camera pose (:mod:`maptidal.mission.verification`):
@@ -67,6 +70,7 @@ from maptidal.perception.frontend import POSE_SOURCES, FrontEnd, FrontEndParams
 from maptidal.perception.keyframing import KeyframeParams
 from maptidal.perception.odometry import OdometryParams
 from maptidal.perception.recording import CameraIntrinsics, rotation_from_quaternion
+from maptidal.perception.relocalisation import RelocalisationParams
 
 EVENT_KINDS = ("fail", "join", "outage", "current")
 REACH_MARGIN_M = (
@@ -124,7 +128,12 @@ class MissionParams:
     # reckoning: in session 9, before the motion model, 2 Hz kept more tracks alive but did not make it
     # localise well enough and cost a third of the real-time factor
     frame_rate_no_dvl_hz: float = 1.0
-    lost_after_s: float = 3.0  # a robot without a DVL and without a visual fix this long holds still
+    lost_after_s: float = 3.0  # a robot without a DVL and without a visual fix this long is lost
+    # ... and so is one whose front end holds its horizontal position to be more uncertain (standard
+    # deviation) than a task's position tolerance (position_tolerance_m, 15 cm): it could not tell it
+    # is at a viewpoint, and a little farther on relocalisation no longer finds its anchors (some 30 cm,
+    # 120 px at 1 m: maptidal.perception.relocalisation), so it goes back to where its map is surest
+    lost_sigma_m: float = 0.15
     # keeping clear of teammates, on where their last message said they were: two Heavy hulls (0.457 x
     # 0.575 m, Blue Robotics' technical details) touch below 0.73 m centre to centre at worst; 1 m leaves
     # the rest for the estimates' error. A robot yields to every teammate of a lower index heard from in
@@ -142,6 +151,12 @@ class MissionParams:
     # own process, on its drawing thread: 1.1 to 1.3 times slower on 2 cores, with the same results)
     perception_process: bool = True
     pose_source: str = "vo"
+    # how far off the robots' estimators' motion models are (controllers.estimation.MotionModel.perturbed;
+    # a robot without a DVL dead-reckons on one): 0, the simulator's own coefficients
+    motion_model_error: float = 0.0
+    # a robot without a DVL relocalises against its own map (maptidal.perception.relocalisation); False
+    # leaves it on visual odometry and its motion model alone, for comparison
+    relocalise: bool = True
     explore_yaw_deg: float = 60.0
     yaw_rate_deg_s: float = 12.0
     speed_m_s: float = 0.25
@@ -191,12 +206,14 @@ class MissionParams:
             raise ValueError(f"pose source must be one of {POSE_SOURCES}, got {self.pose_source!r}")
         if not (
             self.frame_rate_hz > 0
+            and self.frame_rate_no_dvl_hz > 0
             and self.command_rate_hz > 0
             and self.dwell_s >= 0
             and self.task_timeout_s > 0
         ):
             raise ValueError(
-                "frame_rate_hz, command_rate_hz and task_timeout_s must be positive, dwell_s >= 0"
+                "frame_rate_hz, frame_rate_no_dvl_hz, command_rate_hz and task_timeout_s must be positive, "
+                "dwell_s >= 0"
             )
         if not (
             math.isfinite(self.position_tolerance_m)
@@ -209,6 +226,10 @@ class MissionParams:
                 f"max_pitch_deg in [0, 80]; got {self.position_tolerance_m!r}, "
                 f"{self.direction_tolerance_deg!r}, {self.max_pitch_deg!r}"
             )
+        if not (math.isfinite(self.motion_model_error) and 0 <= self.motion_model_error < 1):
+            raise ValueError(f"motion_model_error must be in [0, 1), got {self.motion_model_error!r}")
+        if not (math.isfinite(self.lost_sigma_m) and self.lost_sigma_m > 0):
+            raise ValueError(f"lost_sigma_m must be positive, got {self.lost_sigma_m!r}")
         if not (math.isfinite(self.clearance_m) and self.clearance_m >= 0):
             raise ValueError(f"clearance_m must be finite and >= 0, got {self.clearance_m!r}")
         check_render_samples(self.render_samples)
@@ -248,6 +269,11 @@ class _Robot:
     fixes_seen: int = 0
     last_fix_s: float = 0.0
     lost: bool = False
+    position_sigma_m: float = 0.0  # its front end's horizontal standard deviation, as of the last frame
+    home_position: np.ndarray = field(default_factory=lambda: np.zeros(3))  # where it explored from
+    home_yaw: float = 0.0  # the heading it explored along (its map lies that way)
+    recovery: Route | None = None  # its way back home when lost, flown from lost_since_s
+    lost_since_s: float = 0.0
     yielding: bool = False  # holding its reference out of a teammate's clearance
     launch: tuple[np.ndarray, float] | None = None  # a joining robot's parking pose (position, yaw)
     last_left: np.ndarray | None = None  # the latest left image, for the video's inset
@@ -347,6 +373,7 @@ class Mission:
             flight_mode="stabilize",
             render_samples=params.render_samples,
             water_backend=params.water_backend,
+            motion_model_error=params.motion_model_error,
         )
         self.sim.reset(seed=params.seed)
         k = np.array(self.sim.intrinsics()["K"])
@@ -374,7 +401,9 @@ class Mission:
                 self.intrinsics,
                 params.pose_source,
                 FrontEndParams(
-                    keyframes=params.keyframes, odometry=OdometryParams(has_dvl="dvl" in spec.sensors)
+                    keyframes=params.keyframes,
+                    odometry=OdometryParams(has_dvl="dvl" in spec.sensors),
+                    relocalisation=RelocalisationParams(enabled=params.relocalise),
                 ),
             )
             self.robots[spec.name] = _Robot(
@@ -434,6 +463,7 @@ class Mission:
     def _start_exploring(self, robot: _Robot, now: float) -> None:
         estimate = self._estimate(robot)
         here, yaw = estimate.position.copy(), estimate.yaw
+        robot.home_position, robot.home_yaw = here.copy(), yaw
         sweep = math.radians(self.params.explore_yaw_deg)
         limits = self._limits()
         robot.route = Route(
@@ -452,12 +482,30 @@ class Mission:
             share = min(1.0, (now - robot.route_start_s) / max(robot.route.duration, 1e-9))
             reference = dataclasses.replace(reference, pitch=robot.goal.pitch * share)
         if self._lost(robot, now):
-            # no horizontal position for a while (no DVL, no visual fix): hold depth and heading, and do not
-            # chase a goal the robot cannot tell it has reached (that flies it away at full speed)
-            here = self._estimate(robot).position
-            position = np.array([here[0], here[1], reference.position[2]])
-            reference = PoseReference(position, np.zeros(3), np.zeros(3), reference.yaw, 0.0)
+            # no horizontal position for a while (no DVL, no visual fix): do not chase a goal the robot
+            # cannot tell it has reached (that flies it away at full speed); go where a fix is likely, on
+            # the dead reckoning, which holds for the few seconds this takes (``_lost``)
+            if now - robot.lost_since_s > robot.recovery.duration:
+                self._start_recovery(robot, now)  # home, swept, and still lost: sweep again
+            reference = robot.recovery.at(now - robot.lost_since_s)
         return self._keep_clear(robot, reference, now)
+
+    def _start_recovery(self, robot: _Robot, now: float) -> None:
+        """A lost robot's way back (``_lost``): on its dead reckoning to where it explored from, turning
+        to the heading it explored along, the view its map knows best; then the exploration's yaw sweep
+        there, in case that view is bare (its estimate may be off, and the robot facing a blank wall)."""
+        estimate = self._estimate(robot)
+        home, yaw, limits = robot.home_position, robot.home_yaw, self._limits()
+        sweep = math.radians(self.params.explore_yaw_deg)
+        robot.recovery = Route(
+            [
+                PoseTrajectory(estimate.position.copy(), estimate.yaw, home, yaw, limits),
+                PoseTrajectory(home, yaw, home, yaw + sweep, limits),
+                PoseTrajectory(home, yaw + sweep, home, yaw - sweep, limits),
+                PoseTrajectory(home, yaw - sweep, home, yaw, limits),
+            ]
+        )
+        robot.lost_since_s = now
 
     def _keep_clear(self, robot: _Robot, reference: PoseReference, now: float) -> PoseReference:
         """The reference moved out of the ``clearance_m`` ball about each teammate the robot yields to
@@ -495,27 +543,37 @@ class Mission:
         return PoseReference(target, np.zeros(3), np.zeros(3), reference.yaw, reference.yaw_rate)
 
     def _lost(self, robot: _Robot, now: float) -> bool:
-        """A robot without a DVL whose visual odometry has not fixed its position for ``lost_after_s``."""
+        """A robot without a DVL whose front end has had no visual fix for ``lost_after_s``, or whose
+        position it holds to be more than ``lost_sigma_m`` uncertain; it is found again once it has a
+        fix and is half as uncertain (so that it does not flicker between the two)."""
         if robot.has_dvl or self.params.pose_source != "vo":
             return False
         updates = robot.visual_updates
         if updates != robot.fixes_seen:
             robot.fixes_seen, robot.last_fix_s = updates, now
-        lost = now - robot.last_fix_s > self.params.lost_after_s
+        unfixed = now - robot.last_fix_s > self.params.lost_after_s
+        limit = self.params.lost_sigma_m * (0.5 if robot.lost else 1.0)
+        lost = unfixed or robot.position_sigma_m > limit
         if lost != robot.lost:
             robot.lost = lost
             if lost:
                 robot.controller.reset_horizontal()
+                # go back to where it explored from, the view its map knows best (its anchors there were
+                # made first, and surest), and turn to the heading it explored along: a robot staring at a
+                # bare patch of wall close up, or backing off step by step, never finds a fix
+                self._start_recovery(robot, now)
+
             self.writer.event(now, "position_lost" if lost else "position_regained", robot=robot.name)
         return lost
 
     def _estimate(self, robot: _Robot):
-        """What the robot flies on: its dead reckoning, with the horizontal position corrected by its visual
-        odometry when the pose source is ``vo`` (the offset is refreshed at every frame; between frames the
-        dead reckoning carries it). The SLAM stand-in: without it a robot with no DVL flies blind."""
+        """What the robot flies on: its dead reckoning, with the horizontal position corrected by its front
+        end (visual odometry and relocalisation, weighed against the DVL or the motion model) when the pose
+        source is ``vo``: the pose it meshes on. The offset is refreshed at every frame; between frames the
+        dead reckoning carries it. Without it a robot with no DVL flies blind."""
         estimate = self.sim.estimate(robot.name)
-        if robot.has_dvl or not robot.xy_correction.any():
-            return estimate  # with a DVL the dead reckoning is the better estimate (README, front-end ATE)
+        if not robot.xy_correction.any():
+            return estimate
         corrected = dataclasses.replace(estimate, position=estimate.position.copy())
         corrected.position[:2] += robot.xy_correction
         return corrected
@@ -741,6 +799,7 @@ class Mission:
         if result.xy_correction is not None:
             # the visual pose of the camera, back to the body: the horizontal offset to fly on
             robot.xy_correction = result.xy_correction
+            robot.position_sigma_m = result.position_sigma_m
         robot.visual_updates = result.visual_updates
         if result.faces == 0:
             return

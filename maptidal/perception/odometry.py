@@ -40,7 +40,11 @@ class OdometryParams:
     # a step longer than this is a bad solution (a planar wall can fool PnP): 1.5 m/s, the BlueROV2's top
     # speed (Blue Robotics' product page), at 5 frames/s
     max_step_m: float = 0.3
-    visual_weight: float = 0.8  # horizontal, with a DVL
+    # horizontal, with a DVL: the inverse-variance weight of a visual step (about 2 cm off over a 1 s
+    # frame, the good steps of the robot without a DVL: README, "Closed-loop mission") against the DVL's
+    # (about 1 mm, drift_m2_s_dvl over 1 s): 0.25 %. Until session 15 it was 0.8, and the DVL robot meshed
+    # on a pose 58 cm off (median, 600 s of the default mission) where its DVL alone was 3 cm off
+    visual_weight: float = 0.0025
     visual_weight_depth: float = 0.2
     has_dvl: bool = True
     model_aided: bool = True
@@ -51,6 +55,23 @@ class OdometryParams:
     # the gate, per frame: the model-aided step's error over a 1 s frame comes from the unmodelled thrust
     # lag and the model's error, about 20 % of a 0.25 m/s speed (5 cm); the gate is some 2.5 times that
     max_disagreement_m: float = 0.12
+    # the horizontal position's uncertainty, for weighing a relocalisation (maptidal.perception.
+    # relocalisation) against the dead reckoning as a Kalman filter does: it starts at start_sigma_m (a
+    # known launch spot) and grows as a random walk of drift_m2_s per second. Without a DVL 2e-3 m^2/s,
+    # 30 cm after 45 s: the default mission's robot without a DVL drifted 15 cm in 50 s flying freely and
+    # 1 m in 60 s against a wall, where the thrust it asks for moves it less than its model says (session
+    # 15, between fixes); with a DVL 1e-6 m^2/s, 3.5 cm after 1200 s, the DVL robot's drift there
+    start_sigma_m: float = 0.01
+    drift_m2_s_no_dvl: float = 2e-3
+    # the drift rate adapts to the fixes, up to max_drift_scale times its own: a fix whose normalised
+    # innovation squared (innovation^2 over the prediction's and the fix's variances; 2 on average for
+    # a right model, two degrees of freedom) exceeds 2, or one the gate refused, scales it by 1.5, one
+    # below 0.5 by 0.9 down to 1: a motion model whose coefficients are off drifts faster than it says.
+    # With a DVL it does not adapt: a fix that surprises a DVL is the fix's error (a place mapped from a
+    # pose a few cm off), and letting such fixes speed its drift up pulled one 33 cm off in 1200 s
+    max_drift_scale: float = 20.0
+    max_drift_scale_dvl: float = 1.0
+    drift_m2_s_dvl: float = 1e-6
 
     @property
     def horizontal_weight(self) -> float:
@@ -58,6 +79,16 @@ class OdometryParams:
         if self.has_dvl:
             return self.visual_weight
         return self.visual_weight_model_aided if self.model_aided else 1.0
+
+    @property
+    def drift_scale_limit(self) -> float:
+        """How far the drift rate may adapt (see ``max_drift_scale``)."""
+        return self.max_drift_scale_dvl if self.has_dvl else self.max_drift_scale
+
+    @property
+    def base_drift_m2_s(self) -> float:
+        """The drift rate before adaptation (see ``drift_m2_s_no_dvl``, ``drift_m2_s_dvl``)."""
+        return self.drift_m2_s_dvl if self.has_dvl else self.drift_m2_s_no_dvl
 
     @property
     def dead_reckons_horizontally(self) -> bool:
@@ -107,16 +138,25 @@ class VisualOdometry:
         self._last_dr: CameraPose | None = None
         self.visual_updates = 0
         self.gated = 0  # visual steps dropped by the gate
+        self.fixes = 0  # relocalisations applied (correct)
+        self.sigma_m = self.params.start_sigma_m  # the horizontal position's standard deviation
+        self.drift_scale = 1.0  # how much faster than its parameter the position drifts (adapted)
 
     def update(
-        self, dead_reckoning: CameraPose, motion: tuple[np.ndarray, np.ndarray, int] | None
+        self,
+        dead_reckoning: CameraPose,
+        motion: tuple[np.ndarray, np.ndarray, int] | None,
+        dt_s: float = 0.0,
     ) -> CameraPose:
         """The fused pose after one frame, from this frame's dead-reckoned pose and the visual motion
         (:func:`relative_motion`, None when PnP failed; a step longer than ``max_step_m``, or one the gate
-        refuses, is dropped as a wrong solution). The first frame starts at the dead reckoning."""
+        refuses, is dropped as a wrong solution), ``dt_s`` after the last frame (the horizontal variance
+        grows by ``drift_m2_s dt_s``). The first frame starts at the dead reckoning."""
         if self.pose is None or self._last_dr is None:
             self.pose, self._last_dr = dead_reckoning, dead_reckoning
             return self.pose
+        drift = self.params.base_drift_m2_s * self.drift_scale
+        self.sigma_m = float(np.sqrt(self.sigma_m**2 + drift * max(dt_s, 0.0)))
         dr_step = dead_reckoning.position - self._last_dr.position
         step = dr_step
         if motion is not None:
@@ -140,3 +180,29 @@ class VisualOdometry:
         self.pose = CameraPose(self.pose.position + step, dead_reckoning.rotation)
         self._last_dr = dead_reckoning
         return self.pose
+
+    def correct(self, centre: np.ndarray, sigma_m: float) -> CameraPose:
+        """Fold in a relocalisation's camera ``centre`` of horizontal standard deviation ``sigma_m``: the
+        horizontal position moves the Kalman gain ``s^2 / (s^2 + sigma_m^2)`` of the way (``s`` this
+        estimate's ``sigma_m``), and its variance shrinks by ``1 - gain``; depth stays the pressure
+        sensor's. The next frame's increments carry on from there."""
+        if self.pose is None:
+            raise RuntimeError("a fix before the first frame")
+        gain = self.sigma_m**2 / (self.sigma_m**2 + sigma_m**2)
+        innovation = np.asarray(centre, float)[:2] - self.pose.position[:2]
+        normalised = float(innovation @ innovation) / (self.sigma_m**2 + sigma_m**2)
+        if normalised > 2.0:
+            self.surprised()
+        elif normalised < 0.5:
+            self.drift_scale = max(1.0, 0.9 * self.drift_scale)
+        position = self.pose.position.copy()
+        position[:2] += gain * (np.asarray(centre, float)[:2] - position[:2])
+        self.pose = CameraPose(position, self.pose.rotation)
+        self.sigma_m = float(np.sqrt((1.0 - gain) * self.sigma_m**2))
+        self.fixes += 1
+        return self.pose
+
+    def surprised(self) -> None:
+        """A fix farther off than the uncertainty allowed (or refused for it): the drift rate grows by
+        half, up to ``drift_scale_limit`` times its own."""
+        self.drift_scale = min(self.params.drift_scale_limit, 1.5 * self.drift_scale)

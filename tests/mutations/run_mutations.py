@@ -1,4 +1,5 @@
-"""Re-run the mutation lists of tests/README.md (M: physics, F: flight modes and estimator): apply each
+"""Re-run the mutation lists of tests/README.md (M: physics, F: flight modes and estimator, V: done means
+seen, L: localisation): apply each
 mutation to the source, run its group's tests, record which test fails first, and restore the file.
 Every mutation must be killed.
 
@@ -30,7 +31,8 @@ FLIGHT_TESTS = [
     "tests/test_model_aided.py",
 ]
 VERIFICATION_TESTS = ["tests/test_done_means_seen.py", "tests/test_mission.py"]
-TESTS_OF_GROUP = {"M": TESTS, "F": FLIGHT_TESTS, "V": VERIFICATION_TESTS}
+LOCALISATION_TESTS = ["tests/test_relocalisation.py", "tests/test_localisation_loop.py"]
+TESTS_OF_GROUP = {"M": TESTS, "F": FLIGHT_TESTS, "V": VERIFICATION_TESTS, "L": LOCALISATION_TESTS}
 
 # id: (description, [(file, old, new), ...])
 MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
@@ -341,6 +343,64 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "        return max(-cap, min(cap, pitch))\n",
             )
         ],
+    ),
+    "L1": (
+        "the camera centre from rays with the projector's sign flipped (I + b b^T)",
+        [("maptidal/perception/relocalisation.py", "np.eye(3)[None] - rays", "np.eye(3)[None] + rays")],
+    ),
+    "L2": (
+        "a fix replaces the estimate whatever either's uncertainty (gain 1)",
+        [
+            (
+                "maptidal/perception/odometry.py",
+                "gain = self.sigma_m**2 / (self.sigma_m**2 + sigma_m**2)",
+                "gain = 1.0",
+            )
+        ],
+    ),
+    "L3": (
+        "no innovation gate",
+        [
+            (
+                "maptidal/perception/relocalisation.py",
+                "innovation > p.gate * math.hypot",
+                "innovation > 1e9 * math.hypot",
+            )
+        ],
+    ),
+    "L4": (
+        "no ratio test in the guided match",
+        [("maptidal/perception/relocalisation.py", "first >= p.ratio * float", "first >= 1e9 * float")],
+    ),
+    "L5": (
+        "surer anchors never take the place of unsure ones",
+        [("maptidal/perception/relocalisation.py", "elif worse[close].all():", "elif False:")],
+    ),
+    "L6": (
+        "a robot is lost only without fixes, never for its uncertainty",
+        [("maptidal/mission/run.py", "lost = unfixed or robot.position_sigma_m > limit", "lost = unfixed")],
+    ),
+    "L7": (
+        "a lost robot holds its reference instead of going home",
+        [("maptidal/mission/run.py", "reference = robot.recovery.at(now - robot.lost_since_s)", "pass")],
+    ),
+    "L8": (
+        "the DVL robot's visual step weighs 0.8 again",
+        [("maptidal/perception/odometry.py", "visual_weight: float = 0.0025", "visual_weight: float = 0.8")],
+    ),
+    "L9": (
+        "the front end never applies a fix",
+        [
+            (
+                "maptidal/perception/frontend.py",
+                "pose = self.odometry.correct(fix.centre, fix.sigma_m)",
+                "pose = pose",
+            )
+        ],
+    ),
+    "L10": (
+        "the drift rate never adapts to surprising fixes",
+        [("maptidal/perception/odometry.py", "if normalised > 2.0:", "if False:")],
     ),
 }
 

@@ -1,0 +1,333 @@
+"""Relocalisation against the robot's own map (maptidal.perception.relocalisation), checked against
+constructions that share nothing with it: a brute-force search of the camera centre, synthetic views of
+a textured wall drawn by a homography, and the Kalman update written out by hand."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from maptidal.perception.odometry import OdometryParams, VisualOdometry
+from maptidal.perception.recording import CameraIntrinsics, CameraPose
+from maptidal.perception.relocalisation import (
+    AnchorMap,
+    RelocalisationParams,
+    bearings,
+    centre_from_rays,
+    describe,
+    locate,
+    project,
+)
+
+INTRINSICS = CameraIntrinsics(320, 200, 196.0, 196.0, 160.0, 100.0, 0.075)
+
+
+def facing_wall(yaw_deg: float = 0.0) -> np.ndarray:
+    """Optical-to-world rotation of a camera looking along +x (towards a wall at x = 0), turned by yaw."""
+    yaw = math.radians(yaw_deg)
+    forward = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    right = np.array([math.sin(yaw), -math.cos(yaw), 0.0])  # image right: world -y when facing +x
+    down = np.array([0.0, 0.0, -1.0])
+    return np.column_stack([right, down, forward])
+
+
+def test_the_centre_from_rays_is_the_brute_force_minimum():
+    rng = np.random.default_rng(3)
+    centre = np.array([-1.2, 0.3, 1.0])
+    points = np.column_stack([np.zeros(20), rng.uniform(-1, 1, 20), rng.uniform(0.2, 1.8, 20)])
+    rays = points - centre + rng.normal(0, 0.01, (20, 3))  # a little noise: the minimum is not the truth
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    solved = centre_from_rays(points, rays)
+
+    def cost(c):
+        offsets = points - c
+        along = np.einsum("ni,ni->n", offsets, rays)
+        return float(np.sum(np.linalg.norm(offsets - along[:, None] * rays, axis=1) ** 2))
+
+    # brute force: a grid 1 mm fine around the truth, then 0.1 mm around its best point
+    best = centre
+    for step in (1e-3, 1e-4):
+        axis = np.arange(-20, 21) * step
+        grid = best + np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+        best = grid[np.argmin([cost(c) for c in grid])]
+    assert np.linalg.norm(solved - best) < 2e-4
+    assert cost(solved) <= cost(best) + 1e-12
+
+
+def test_parallel_rays_fix_nothing():
+    points = np.array([[0.0, 0.0, 1.0], [0.0, 0.5, 1.0], [0.0, 1.0, 1.0]])
+    rays = np.tile([1.0, 0.0, 0.0], (3, 1))
+    assert centre_from_rays(points, rays) is None
+
+
+def test_locate_finds_the_centre_among_outliers():
+    rng = np.random.default_rng(7)
+    rotation = facing_wall(15.0)
+    centre = np.array([-1.1, -0.2, 0.9])
+    # points on the end wall (x = 0) and an angled wall, in view
+    wall = np.column_stack([np.zeros(40), rng.uniform(-0.6, 0.3, 40), rng.uniform(0.5, 1.3, 40)])
+    angled = np.column_stack([rng.uniform(-0.6, 0, 20), np.zeros(20), rng.uniform(0.5, 1.3, 20)])
+    angled[:, 1] = -0.8 - angled[:, 0]
+    points = np.vstack([wall, angled])
+    pixels, depth = project(points, centre, rotation, INTRINSICS)
+    assert (depth > 0).all()
+    pixels = pixels + rng.normal(0, 0.5, pixels.shape)
+    wrong = rng.choice(len(points), 18, replace=False)  # 30 % of the matches are wrong
+    pixels[wrong] = rng.uniform([0, 0], [320, 200], (len(wrong), 2))
+    found = locate(points, pixels, rotation, INTRINSICS, RelocalisationParams(), np.random.default_rng(0))
+    assert found is not None
+    solved, inliers = found
+    assert np.linalg.norm(solved - centre) < 0.01
+    assert not inliers[wrong].any() or inliers[wrong].sum() <= 2  # a wrong match may land near its pixel
+    assert inliers.sum() >= len(points) - len(wrong) - 2
+
+
+def test_too_few_matches_give_no_fix():
+    rotation = facing_wall()
+    points = np.array([[0.0, 0.1 * k, 1.0] for k in range(5)])
+    pixels, _ = project(points, np.array([-1.0, 0.0, 1.0]), rotation, INTRINSICS)
+    params = RelocalisationParams(min_inliers=8)
+    assert locate(points, pixels, rotation, INTRINSICS, params, np.random.default_rng(0)) is None
+
+
+# ----- views of a textured wall ----------------------------------------------------------------------
+TEXTURE_M = 4.0  # the texture spans the wall y in [-2, 2] m, z in [0, 4] m
+TEXTURE_PX = 1600
+
+
+def _texture() -> np.ndarray:
+    rng = np.random.default_rng(11)
+    noise = rng.uniform(0, 255, (TEXTURE_PX // 8, TEXTURE_PX // 8)).astype(np.float32)
+    image = cv2.resize(noise, (TEXTURE_PX, TEXTURE_PX), interpolation=cv2.INTER_CUBIC)
+    blobs = np.zeros_like(image)
+    for _ in range(900):
+        u, v = rng.integers(0, TEXTURE_PX, 2)
+        cv2.circle(blobs, (int(u), int(v)), int(rng.integers(3, 12)), float(rng.uniform(60, 255)), -1)
+    return np.clip(0.5 * image + blobs, 0, 255).astype(np.uint8)
+
+
+def wall_view(texture: np.ndarray, centre: np.ndarray, rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The wall x = 0 seen by the camera, drawn by the plane's homography, and each pixel's depth (m)."""
+    # texture pixel (a, b) is the wall point y = 2 - a * s, z = 4 - b * s
+    s = TEXTURE_M / TEXTURE_PX
+    to_wall = np.array([[0.0, 0.0, 0.0], [-s, 0.0, 2.0], [0.0, -s, 4.0]])  # (x, y, z) = M (a, b, 1)
+    k = np.array([[INTRINSICS.fx, 0, INTRINSICS.cx], [0, INTRINSICS.fy, INTRINSICS.cy], [0, 0, 1]])
+    offset = np.array([[0.0, 0.0, -centre[0]], [0.0, 0.0, -centre[1]], [0.0, 0.0, -centre[2]]])
+    homography = k @ rotation.T @ (to_wall + offset)
+    image = cv2.warpPerspective(
+        texture, homography, (INTRINSICS.width, INTRINSICS.height), flags=cv2.INTER_AREA
+    )
+    u, v = np.meshgrid(np.arange(INTRINSICS.width) + 0.0, np.arange(INTRINSICS.height) + 0.0)
+    rays = bearings(np.column_stack([u.ravel(), v.ravel()]), rotation, INTRINSICS)
+    distance = -centre[0] / rays[:, 0]  # along each ray to x = 0
+    depth = distance * (rays @ rotation[:, 2])
+    return image, depth.reshape(u.shape)
+
+
+def corners(image: np.ndarray) -> np.ndarray:
+    found = cv2.goodFeaturesToTrack(image, 300, 0.01, 6, blockSize=7)
+    return found.reshape(-1, 2).astype(float)
+
+
+def _frame(texture, centre, rotation):
+    image, depth = wall_view(texture, centre, rotation)
+    pixels = corners(image)
+    z = depth[pixels[:, 1].astype(int), pixels[:, 0].astype(int)]
+    rays = np.column_stack(
+        [
+            (pixels[:, 0] - INTRINSICS.cx) / INTRINSICS.fx,
+            (pixels[:, 1] - INTRINSICS.cy) / INTRINSICS.fy,
+            np.ones(len(pixels)),
+        ]
+    )
+    return image, pixels, rays * z[:, None]
+
+
+@pytest.mark.parametrize("offset", [(0.0, 0.15, 0.0), (0.12, -0.1, 0.05)])
+def test_a_second_view_nearer_and_turned_is_relocalised_on_the_map_of_the_first(offset):
+    """Anchors made at 1.6 m; the robot then comes to 1.0 m, 20 cm aside and turned 12 deg, believing
+    itself ``offset`` away from where it is: the fix lands within 3 cm of the truth."""
+    texture = _texture()
+    params = RelocalisationParams()
+    anchors = AnchorMap(INTRINSICS, params)
+    first_centre, first_rotation = np.array([-1.6, 0.0, 1.8]), facing_wall()
+    image, pixels, points = _frame(texture, first_centre, first_rotation)
+    descriptors, valid = describe(image, pixels, points[:, 2], INTRINSICS, params.support_m)
+    made = anchors.add(CameraPose(first_centre, first_rotation), pixels, points, descriptors, valid, 0.01)
+    assert made > 100
+
+    centre, rotation = np.array([-1.0, -0.2, 1.75]), facing_wall(12.0)
+    image, pixels, points = _frame(texture, centre, rotation)
+    descriptors, valid = describe(image, pixels, points[:, 2], INTRINSICS, params.support_m)
+    believed = CameraPose(centre + np.array(offset), rotation)
+    fix, matched = anchors.relocalise(believed, pixels, descriptors, valid, sigma_m=0.1)
+    assert fix is not None, dict(anchors.refused)
+    assert np.linalg.norm(fix.centre - centre) < 0.03
+    assert fix.inliers >= params.min_inliers and len(matched) == fix.inliers
+    assert fix.sigma_m == pytest.approx(math.hypot(0.01, params.fix_sigma_m))
+
+
+def test_a_fix_beyond_the_innovation_gate_is_refused():
+    """The same second view, believed 15 cm off by a robot sure of itself to 2 cm: the fix is too far
+    from the prediction for both to be right (3.03 standard deviations of their difference, 9 cm). The
+    search is widened, so that the anchors are found at all."""
+    texture = _texture()
+    params = RelocalisationParams(min_search_radius_px=60.0)
+    anchors = AnchorMap(INTRINSICS, params)
+    first_centre, first_rotation = np.array([-1.6, 0.0, 1.8]), facing_wall()
+    image, pixels, points = _frame(texture, first_centre, first_rotation)
+    descriptors, valid = describe(image, pixels, points[:, 2], INTRINSICS, params.support_m)
+    anchors.add(CameraPose(first_centre, first_rotation), pixels, points, descriptors, valid, 0.01)
+    centre, rotation = np.array([-1.0, -0.2, 1.75]), facing_wall(12.0)
+    image, pixels, points = _frame(texture, centre, rotation)
+    descriptors, valid = describe(image, pixels, points[:, 2], INTRINSICS, params.support_m)
+    believed = CameraPose(centre + np.array([0.0, 0.15, 0.0]), rotation)
+    fix, _ = anchors.relocalise(believed, pixels, descriptors, valid, sigma_m=0.02)
+    assert fix is None and anchors.refused["gate"] == 1
+    fix, _ = anchors.relocalise(believed, pixels, descriptors, valid, sigma_m=0.1)  # unsure: let through
+    assert fix is not None and np.linalg.norm(fix.centre - centre) < 0.03
+
+
+def test_a_robot_far_off_is_relocalised_against_the_whole_map():
+    """Believed 1 m from where it is, beyond any search near the prediction: a robot that knows itself
+    lost (0.5 m unsure) is found again by matching against every anchor; one that believes itself
+    surer is not (it would take a wrong fix for a right one)."""
+    texture = _texture()
+    params = RelocalisationParams()
+    first_centre, first_rotation = np.array([-1.6, 0.0, 1.8]), facing_wall()
+    image, pixels, points = _frame(texture, first_centre, first_rotation)
+    descriptors, valid = describe(image, pixels, points[:, 2], INTRINSICS, params.support_m)
+    centre, rotation = np.array([-1.0, -0.2, 1.75]), facing_wall(12.0)
+    second = _frame(texture, centre, rotation)
+    second_descriptors, second_valid = describe(
+        second[0], second[1], second[2][:, 2], INTRINSICS, params.support_m
+    )
+    believed = CameraPose(centre + np.array([-0.8, 0.6, 0.0]), rotation)
+    for sigma, found in ((0.5, True), (0.2, False)):
+        anchors = AnchorMap(INTRINSICS, params)
+        anchors.add(CameraPose(first_centre, first_rotation), pixels, points, descriptors, valid, 0.01)
+        fix, _ = anchors.relocalise(believed, second[1], second_descriptors, second_valid, sigma_m=sigma)
+        assert (fix is not None) == found, (sigma, dict(anchors.refused))
+        if found:
+            assert anchors.global_fixes == 1 and np.linalg.norm(fix.centre - centre) < 0.03
+            assert fix.inliers >= params.global_min_inliers
+
+
+def test_a_view_of_another_wall_gives_no_fix():
+    """Anchors from one texture, then a view of a wall with another: nothing to relocalise on."""
+    params = RelocalisationParams()
+    anchors = AnchorMap(INTRINSICS, params)
+    centre, rotation = np.array([-1.2, 0.0, 1.8]), facing_wall()
+    image, pixels, points = _frame(_texture(), centre, rotation)
+    descriptors, valid = describe(image, pixels, points[:, 2], INTRINSICS, params.support_m)
+    anchors.add(CameraPose(centre, rotation), pixels, points, descriptors, valid, 0.01)
+    other = np.flipud(np.fliplr(_texture())).copy()
+    image, pixels, points = _frame(other, centre, rotation)
+    descriptors, valid = describe(image, pixels, points[:, 2], INTRINSICS, params.support_m)
+    fix, _ = anchors.relocalise(CameraPose(centre + [0, 0.1, 0], rotation), pixels, descriptors, valid, 0.1)
+    assert fix is None
+    fix, _ = anchors.relocalise(CameraPose(centre + [0, 0.1, 0], rotation), pixels, descriptors, valid, 1.0)
+    assert fix is None  # nor against the whole map
+
+
+def test_anchors_are_not_doubled_but_surer_ones_take_the_place_of_unsure_ones():
+    texture = _texture()
+    params = RelocalisationParams()
+    centre, rotation = np.array([-1.4, 0.0, 1.8]), facing_wall()
+    image, pixels, points = _frame(texture, centre, rotation)
+    descriptors, valid = describe(image, pixels, points[:, 2], INTRINSICS, params.support_m)
+    pose = CameraPose(centre, rotation)
+    anchors = AnchorMap(INTRINSICS, params)
+    first = anchors.add(pose, pixels, points, descriptors, valid, 0.2)
+    assert anchors.add(pose, pixels, points, descriptors, valid, 0.15) == 0  # not sure enough to replace
+    assert len(anchors) == first
+    replaced = anchors.add(pose, pixels, points, descriptors, valid, 0.02)  # 0.2 > 2 x 0.02 + 0.01
+    assert replaced == first and len(anchors) == first
+    assert np.allclose(anchors.sigmas, 0.02)
+
+
+def test_a_fix_is_weighed_as_a_kalman_filter_does():
+    odometry = VisualOdometry(OdometryParams(has_dvl=False, start_sigma_m=0.0))
+    rotation = facing_wall()
+    odometry.update(CameraPose(np.array([-1.0, 0.0, 1.0]), rotation), None)
+    odometry.update(CameraPose(np.array([-1.0, 0.0, 1.0]), rotation), None, dt_s=20.0)
+    drift = OdometryParams().drift_m2_s_no_dvl
+    assert odometry.drift_scale == 1.0
+    assert odometry.sigma_m == pytest.approx(math.sqrt(drift * 20.0))
+    prior = odometry.sigma_m**2
+    pose = odometry.correct(np.array([-0.8, 0.4, 5.0]), sigma_m=0.05)
+    gain = prior / (prior + 0.05**2)
+    assert pose.position == pytest.approx([-1.0 + 0.2 * gain, 0.4 * gain, 1.0])  # depth: the pressure's
+    assert odometry.sigma_m == pytest.approx(math.sqrt(prior * 0.05**2 / (prior + 0.05**2)))
+
+
+def test_fixes_farther_off_than_the_uncertainty_allowed_speed_the_drift_up():
+    """A motion model that is off drifts faster than the estimator's parameter says: each fix that lands
+    farther off than the uncertainty allows scales the drift rate by 1.5, up to its cap; fixes that land
+    close bring it back down to its own."""
+    params = OdometryParams(has_dvl=False)
+    odometry = VisualOdometry(params)
+    rotation = facing_wall()
+    here = np.array([-1.0, 0.0, 1.0])
+    odometry.update(CameraPose(here, rotation), None)
+    for _ in range(12):
+        odometry.update(CameraPose(here, rotation), None, dt_s=1.0)
+        odometry.correct(odometry.pose.position + np.array([0.5, 0.0, 0.0]), sigma_m=0.02)
+    assert odometry.drift_scale == params.max_drift_scale
+    before = odometry.sigma_m**2
+    odometry.update(CameraPose(here, rotation), None, dt_s=1.0)
+    assert odometry.sigma_m**2 - before == pytest.approx(params.drift_m2_s_no_dvl * params.max_drift_scale)
+    for _ in range(60):
+        odometry.update(CameraPose(here, rotation), None, dt_s=1.0)
+        odometry.correct(odometry.pose.position, sigma_m=0.02)  # right where it believed it was
+    assert odometry.drift_scale == 1.0
+    dvl = VisualOdometry(OdometryParams(has_dvl=True))  # a DVL's drift does not adapt: the fix is wrong
+    dvl.update(CameraPose(here, rotation), None)
+    dvl.correct(here + np.array([0.5, 0.0, 0.0]), sigma_m=0.02)
+    assert dvl.drift_scale == 1.0
+
+
+def test_with_a_dvl_a_fix_moves_the_estimate_little():
+    """The DVL keeps the say: its estimate's variance grows 500 times slower, so 60 s after the start a
+    fix 2 cm sure moves it less than a third of the way, where it moves a robot without one nearly all."""
+    rotation = facing_wall()
+    moved = {}
+    for has_dvl in (True, False):
+        odometry = VisualOdometry(OdometryParams(has_dvl=has_dvl))
+        odometry.update(CameraPose(np.zeros(3), rotation), None)
+        odometry.update(CameraPose(np.zeros(3), rotation), None, dt_s=60.0)
+        moved[has_dvl] = odometry.correct(np.array([0.1, 0.0, 0.0]), sigma_m=0.02).position[0] / 0.1
+    assert 0.0 < moved[True] < 1 / 3
+    assert moved[False] > 0.95
+
+
+def test_a_keypoint_between_two_look_alike_anchors_matches_neither():
+    """Lowe's ratio test: two anchors whose descriptors are near twins, both in the search window of a
+    keypoint, give no match (the repeated rungs of a ladder); make one distinct and the other is taken."""
+    anchors = AnchorMap(INTRINSICS, RelocalisationParams())
+    rotation, centre = facing_wall(), np.array([-1.0, 0.0, 1.0])
+    pose = CameraPose(centre, rotation)
+    points = np.array([[0.0, 0.02, 1.0], [0.0, -0.02, 1.0]])  # 8 px apart at 1 m
+    rng = np.random.default_rng(5)
+    descriptor = rng.uniform(0, 60, 128).astype(np.float32)
+    twin = descriptor + rng.normal(0, 0.2, 128).astype(np.float32)
+    pixels, _ = project(points, centre, rotation, INTRINSICS)
+    camera = (points - centre) @ rotation
+    anchors.add(pose, pixels, camera, np.stack([descriptor, twin]), np.ones(2, bool), 0.01)
+    assert len(anchors) == 2  # one frame's keypoints are not spaced against each other
+    query = (descriptor + rng.normal(0, 1.0, 128)).astype(np.float32)[None]  # a new look at the place
+    keypoints, matched = anchors.match(pose, pixels[:1], query, np.ones(1, bool), 0.05)
+    assert len(keypoints) == 0
+    anchors.descriptors[1] = rng.uniform(0, 60, 128).astype(np.float32)  # no longer a twin
+    keypoints, matched = anchors.match(pose, pixels[:1], query, np.ones(1, bool), 0.05)
+    assert keypoints.tolist() == [0] and matched.tolist() == [0]
+
+
+def test_bad_parameters_are_refused():
+    with pytest.raises(ValueError, match="min_inliers"):
+        RelocalisationParams(min_inliers=1)
+    with pytest.raises(ValueError, match="depth band"):
+        RelocalisationParams(min_depth_m=2.0, max_depth_m=1.0)
