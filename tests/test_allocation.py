@@ -1,6 +1,7 @@
 """CBBA over the acoustic channel: messages, bids, the greedy and brute-force yardsticks, loss and
 outages, failures, joins, discoveries and completed tasks."""
 
+import itertools
 import math
 from dataclasses import replace
 
@@ -14,7 +15,16 @@ from literal_cbba import literal_cbba
 from maptidal.allocation.agent import AgentParams, CBBAAgent
 from maptidal.allocation.auction import AuctionEvent, AuctionSimulation
 from maptidal.allocation.greedy import sequential_greedy
-from maptidal.allocation.messages import DONE, NO_WINNER, Message, MessageError, decode, encode, size_of
+from maptidal.allocation.messages import (
+    DONE,
+    NO_WINNER,
+    Message,
+    MessageError,
+    decode,
+    encode,
+    size_of,
+    task_runs,
+)
 from maptidal.allocation.scoring import AuctionParams, PathGeometry, RobotProfile
 from maptidal.allocation.tasks import Task, TaskError, capability_mask, task_key
 from maptidal.comms.channel import ChannelParams, Outage
@@ -77,6 +87,101 @@ def test_messages_round_trip_exactly(sender, seq, clocks, acks, entries, n_tasks
     assert back.keys.tolist() == message.keys.tolist()
     assert back.winners.tolist() == message.winners.tolist()
     assert back.bids.tolist() == message.bids.tolist()
+
+
+task_st = st.tuples(
+    st.integers(0, 3),  # origin: few, so that runs form and break
+    st.integers(0, 0xFFFF),
+    st.tuples(*[st.integers(-32767, 32767)] * 3),
+    st.tuples(st.integers(0, 4095), st.integers(0, 4095)),
+    st.integers(0, 2),
+)
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    raw=st.lists(task_st, max_size=40, unique_by=lambda t: (t[0], t[1])),
+    clustered=st.booleans(),
+)
+def test_task_records_in_runs_round_trip_exactly(raw, clustered):
+    # clustered: consecutive counters near each other, as a robot's burst of discoveries is
+    if clustered:
+        raw = [(o, 100 + n, (n * 37, -n * 11, 50), d, 1) for n, (o, _, _, d, _) in enumerate(raw)]
+    tasks = [Task(o << 16 | c, p, d, r) for o, c, p, d, r in raw]
+    message = Message(
+        1, 2, np.array([0, 5]), [], tasks, np.array([], np.int64), np.array([], np.int64), np.array([])
+    )
+    data = encode(message)
+    back = decode(data).tasks
+    key = sorted(tasks, key=lambda t: t.key)
+    assert [(t.key, t.position_cm, t.direction_code, t.requires) for t in back] == [
+        (t.key, t.position_cm, t.direction_code, t.requires) for t in key
+    ]
+    # the size: 11 bytes a run plus 8 a task, the runs counted by hand from where a run must break
+    breaks = sum(
+        1
+        for a, b in itertools.pairwise(key)
+        if b.key != a.key + 1 or b.requires != a.requires or b.key >> 16 != a.key >> 16
+    )
+    n_runs_at_least = (breaks + 1) if key else 0
+    runs = task_runs(tasks)
+    assert len(runs) >= n_runs_at_least
+    assert len(data) == size_of(2, 0, len(tasks), 0, len(runs))
+    assert len(data) == size_of(2, 0, 0, 0, 0) + 11 * len(runs) + 8 * len(tasks)
+
+
+def _run_of(offsets_cm, requires=(1, 1, 1), counters=(0, 1, 2), origins=(0, 0, 0)):
+    return [
+        Task(o << 16 | c, tuple(int(v) for v in np.add((100, -200, 50), off)), (7, 9), r)
+        for off, r, c, o in zip(offsets_cm, requires, counters, origins, strict=True)
+    ]
+
+
+@pytest.mark.parametrize(
+    ("tasks", "n_runs"),
+    [
+        (_run_of([(0, 0, 0), (4095, -4095, 0), (-4095, 4095, 4095)]), 1),  # the offset's whole range
+        (_run_of([(0, 0, 0), (4096, 0, 0), (4096, 0, 0)]), 2),  # 4096 cm from the base: a new run
+        (_run_of([(0, 0, 0), (0, 0, -4096), (0, 0, 0)]), 3),
+        (_run_of([(0, 0, 0)] * 3, requires=(1, 3, 3)), 2),
+        (_run_of([(0, 0, 0)] * 3, counters=(0, 1, 3)), 2),  # a gap in the counters
+        (_run_of([(0, 0, 0)] * 3, origins=(0, 0, 1)), 2),
+        ([Task(c, (0, 0, 0), (0, 0), 1) for c in range(256)], 2),  # a run's count is a byte
+    ],
+)
+def test_task_runs_break_where_the_format_says(tasks, n_runs):
+    assert len(task_runs(tasks)) == n_runs
+    message = Message(
+        0, 1, np.array([0]), [], tasks, np.array([], np.int64), np.array([], np.int64), np.array([])
+    )
+    back = decode(encode(message)).tasks
+    assert [(t.key, t.position_cm) for t in back] == [(t.key, t.position_cm) for t in tasks]
+
+
+def _with_crc(body: bytes) -> bytes:
+    import binascii
+    import struct
+
+    return body + struct.pack("<H", binascii.crc_hqx(body, 0xFFFF))
+
+
+def test_a_task_record_with_its_spare_bit_set_or_an_empty_run_is_malformed():
+    tasks = _run_of([(0, 0, 0), (5, 5, 5), (9, 9, 9)])
+    message = Message(
+        0, 1, np.array([0]), [], tasks, np.array([], np.int64), np.array([], np.int64), np.array([])
+    )
+    body = bytearray(encode(message)[:-2])
+    record_end = len(body) - 2  # the entries' count (zero) follows the last record
+    spare = bytearray(body)
+    spare[record_end - 1] |= 0x80  # bit 63 of the last record
+    with pytest.raises(MessageError, match="spare bit"):
+        decode(_with_crc(bytes(spare)))
+    empty = bytearray(body)
+    count_at = record_end - 3 * 8 - 11 + 3  # origin u8, counter u16, then the count
+    empty[count_at] = 0
+    with pytest.raises(MessageError) as caught:
+        decode(_with_crc(bytes(empty)))
+    assert caught.value.reason == "malformed"
 
 
 def _a_message() -> bytes:

@@ -26,6 +26,7 @@ import numpy as np
 from maptidal.allocation.consensus import RESET, UPDATE, outbids, resolve
 from maptidal.allocation.messages import (
     DONE,
+    ENTRY_DTYPE,
     NEVER,
     NO_WINNER,
     Message,
@@ -33,6 +34,7 @@ from maptidal.allocation.messages import (
     decode,
     encode,
     size_of,
+    task_runs,
 )
 from maptidal.allocation.scoring import (
     AuctionParams,
@@ -134,7 +136,13 @@ class CBBAAgent:
         self._seq = 0
         self._sent: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
         self._last_seq_from: dict[int, int] = {}
+        # (sender, seq) -> the task keys that message carried, so that a third robot's ack of it says
+        # that robot holds those records too (without it, every robot relays every teammate's discoveries
+        # to the others, who heard them already, and a team that all hears each other wastes its channel)
+        self._heard: dict[tuple[int, int], np.ndarray] = {}
         self._ack_owed: dict[int, int] = {}
+        # task key -> when this robot learned it (discovered, or first heard), for tasks given a time
+        self.learned_s: dict[int, float] = {}
         self._last_sent_ms: int | None = None
         self._geometry: PathGeometry | None = None
         self._feasible = np.zeros(0, dtype=bool)
@@ -156,12 +164,17 @@ class CBBAAgent:
         return self._keys
 
     def add_tasks(
-        self, tasks: list[Task], from_robot: int | None = None, known_to: tuple[int, ...] = ()
+        self,
+        tasks: list[Task],
+        from_robot: int | None = None,
+        known_to: tuple[int, ...] = (),
+        now_s: float | None = None,
     ) -> int:
         """Learn tasks (duplicates ignored); returns how many were new.
 
         from_robot: the neighbour the records came from (it knows them); known_to: robots known to hold
-        the records already (for a mission plan every robot was given)."""
+        the records already (for a mission plan every robot was given); now_s: when, kept in
+        :attr:`learned_s` (how fast a robot's discoveries reach its team)."""
         fresh = [t for t in tasks if t.key not in self._slot_of]
         fresh = list({t.key: t for t in fresh}.values())
         if from_robot is not None:
@@ -173,6 +186,8 @@ class CBBAAgent:
         start = len(self.tasks)
         for offset, task in enumerate(fresh):
             self._slot_of[task.key] = start + offset
+            if now_s is not None:
+                self.learned_s[task.key] = now_s
         self.tasks.extend(fresh)
         n_new = len(fresh)
         self.y = np.concatenate([self.y, np.zeros(n_new)])
@@ -204,7 +219,7 @@ class CBBAAgent:
         """Mint a task this robot discovered (key = this robot's index and its own counter) and learn it."""
         task = Task.create(task_key(self.index, self._task_counter), position, direction, requires)
         self._task_counter += 1
-        self.add_tasks([task])
+        self.add_tasks([task], now_s=now_s)
         self.last_change_s = max(self.last_change_s, now_s)
         return task
 
@@ -433,7 +448,9 @@ class CBBAAgent:
         self._peer_task_array(sender)
         self._apply_acks(sender, message.acks)
         if message.tasks:
-            self.add_tasks(message.tasks, from_robot=sender)
+            self.add_tasks(message.tasks, from_robot=sender, now_s=now_s)
+            self._heard[(sender, message.seq)] = np.array([t.key for t in message.tasks], np.int64)
+            self._heard.pop((sender, message.seq - _SENT_MEMORY), None)
         # an ack tells the sender that every entry landed; an entry on a task this robot has no record of
         # is dropped, so the message goes unacknowledged and the sender repeats the entry (a robot that
         # joined after a task was done had otherwise been counted as knowing it done, and flew to it)
@@ -453,6 +470,11 @@ class CBBAAgent:
 
     def _apply_acks(self, sender: int, acks: list[tuple[int, int]]) -> None:
         for robot, seq in acks:
+            overheard = self._heard.get((robot, seq))
+            if robot != self.index and overheard is not None:
+                # the sender acknowledges a message this robot heard too: it holds the records in it
+                slots = self.slots_of(overheard)
+                self._peer_task[sender][slots[slots >= 0]] = True
             if robot != self.index or seq not in self._sent:
                 continue
             slots, winners, bids, task_slots = self._sent[seq]
@@ -551,7 +573,8 @@ class CBBAAgent:
         entry_slots = np.flatnonzero(entries)
         entry_slots = self._by_urgency(entry_slots)
         record_slots = np.flatnonzero(records)
-        if size_of(n_clocks, len(acks), len(record_slots), len(entry_slots)) > budget:
+        runs = len(task_runs([self.tasks[j] for j in record_slots]))
+        if size_of(n_clocks, len(acks), len(record_slots), len(entry_slots), runs) > budget:
             record_slots, entry_slots = self._fit(budget, n_clocks, len(acks), records, entry_slots)
         self._seq += 1
         message = Message(
@@ -598,24 +621,64 @@ class CBBAAgent:
         return entry_slots[np.lexsort((-self._version[entry_slots], rank))]
 
     def _fit(self, budget: float, n_clocks: int, n_acks: int, records: np.ndarray, entry_slots: np.ndarray):
-        """Entries (in :meth:`_by_urgency` order) and the records they need, then other records, within
-        budget."""
+        """What a full message carries, within budget, in this order:
+
+        1. the done entries and the entry of the task this robot flies to next (:meth:`_by_urgency`'s
+           first ones), each with its task record where a peer lacks it;
+        2. the records of this robot's own discoveries that a peer lacks, oldest first: they leave in the
+           order it made them, so each waits only for those before it (a bounded delay while it finds tasks
+           slower than the channel carries them; newest first let a burst's first tasks wait for ever, and
+           die with a robot that failed: issue [truthful-loop]);
+        3. the rest of this robot's path, in flying order;
+        4. records of other robots' discoveries that a peer lacks (relays, for peers out of their finder's
+           range), oldest first;
+        5. the rest of the entries in :meth:`_by_urgency` order.
+
+        An entry travels with its task's record, since a peer drops an entry on a task it has no record
+        of. Sizes count the records' runs exactly (:func:`task_runs`)."""
+        next_task = self.path[0] if self.path else None
+        first = [int(slot) for slot in entry_slots if self.z[slot] == DONE or slot == next_task]
+        first_set = set(first)
+        items: list[tuple[int | None, int | None]] = [
+            (slot, slot if records[slot] else None) for slot in first
+        ]
+        lacking = [int(slot) for slot in np.flatnonzero(records) if slot not in first_set]
+        own = [slot for slot in lacking if self._keys[slot] >> 16 == self.index]
+        on_path = set(self.path)
+        rest = [int(slot) for slot in entry_slots if int(slot) not in first_set]
+        items += [(None, slot) for slot in own]
+        items += [(slot, slot if records[slot] else None) for slot in rest if slot in on_path]
+        items += [(None, slot) for slot in lacking if self._keys[slot] >> 16 != self.index]
+        items += [(slot, slot if records[slot] else None) for slot in rest if slot not in on_path]
         chosen_records: list[int] = []
         chosen_entries: list[int] = []
-        in_records = set()
-        for slot in entry_slots:
-            extra = [int(slot)] if records[slot] and slot not in in_records else []
-            if size_of(n_clocks, n_acks, len(chosen_records) + len(extra), len(chosen_entries) + 1) > budget:
-                break
-            chosen_records += extra
-            in_records.update(extra)
-            chosen_entries.append(int(slot))
-        for slot in np.flatnonzero(records):
-            if slot in in_records:
+        in_records: set[int] = set()
+        in_entries: set[int] = set()
+        size = size_of(n_clocks, n_acks, 0, 0)
+        for entry, record in items:
+            if entry is not None and entry in in_entries:
                 continue
-            if size_of(n_clocks, n_acks, len(chosen_records) + 1, len(chosen_entries)) > budget:
-                break
-            chosen_records.append(int(slot))
+            record = None if record is None or record in in_records else record
+            if entry is None and record is None:
+                continue
+            trial = chosen_records + ([record] if record is not None else [])
+            n_entries = len(chosen_entries) + (entry is not None)
+            needed = size_of(
+                n_clocks, n_acks, len(trial), n_entries, len(task_runs([self.tasks[j] for j in trial]))
+            )
+            if needed > budget:
+                if budget - size < ENTRY_DTYPE.itemsize:
+                    break
+                continue  # a smaller item further on may still fit
+            size = needed
+            if record is not None:
+                chosen_records.append(record)
+                in_records.add(record)
+            if entry is not None:
+                chosen_entries.append(entry)
+                in_entries.add(entry)
+        order = {slot: n for n, slot in enumerate(entry_slots.tolist())}
+        chosen_entries.sort(key=order.__getitem__)  # in urgency order on the wire, as when all fit
         return np.array(chosen_records, dtype=np.int64), np.array(chosen_entries, dtype=np.int64)
 
     # ------------------------------------------------------------------ views

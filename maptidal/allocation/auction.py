@@ -132,7 +132,7 @@ class AuctionSimulation:
         if event.kind == "fail":
             agent.alive = False
         elif event.kind == "discover" and event.task is not None:
-            agent.add_tasks([event.task])
+            agent.add_tasks([event.task], now_s=event.time_s)
             agent.last_change_s = event.time_s
         elif event.kind == "done":
             agent.mark_done(event.task_key, event.time_s)

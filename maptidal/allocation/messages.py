@@ -2,20 +2,26 @@
 
 One message is what a robot broadcasts in its transmit slot: its clock view of the team, the sequence
 numbers it acknowledges, new task records, and the bid entries that changed since its neighbours last
-acknowledged, and where it is. Layout (little-endian, version 2):
+acknowledged, and where it is. Layout (little-endian, version 3):
 
     header    version u8, sender u8, seq u32, n_clocks u8
     position  x/y/z int16 cm: where the sender was when it sent (-32768 x 3: unknown), so that teammates
               can keep clear of it
     clocks    n_clocks x u32   last time heard of each robot, ms + 1 (0 = never)
     acks      n_acks u8, then n_acks x (robot u8, seq u32)
-    tasks     n_tasks u16, then 13-byte records: origin u8, counter u16, x/y/z int16 cm,
-              azimuth and elevation as two 12-bit codes in 3 bytes, requires u8
+    tasks     n_runs u16, then runs of task records: a run is the tasks of one origin with consecutive
+              counters and the same requires mask, within 40.95 m of its first task on every axis:
+              origin u8, first counter u16, count u8, requires u8, base x/y/z int16 cm (11 bytes),
+              then count 8-byte records, each a little-endian u64 holding dx, dy, dz (13-bit two's
+              complement cm from the base) and the 12-bit azimuth and elevation codes (bit 63 zero)
     entries   n_entries u16, then 8-byte records: origin u8, counter u16, winner u8
               (255 = none, 254 = done), bid float32
     checksum  CRC-16/CCITT u16 of everything before it
 
 A 2-robot, 20-task auction moves about 160 bytes of entries per full state; see `maptidal allocate`.
+Version 2 sent every task as a 13-byte record of its own; version 3's runs carry a robot's burst of
+discoveries at 8 bytes a task (plus 11 a run), which is what lets a robot share what it found before it
+can fail with it (issue [truthful-loop]: at 500 bit/s a robot finds tasks faster than 13-byte records leave).
 Anything malformed raises MessageError with a short reason; decode never returns a half-read message.
 """
 
@@ -29,7 +35,7 @@ import numpy as np
 
 from maptidal.allocation.tasks import Task
 
-VERSION = 2
+VERSION = 3
 NO_WINNER = -1
 DONE = -2
 _WIRE_NONE = 255
@@ -43,10 +49,13 @@ _ACK = struct.Struct("<BI")
 _COUNT = struct.Struct("<H")
 _CRC = struct.Struct("<H")
 ENTRY_DTYPE = np.dtype([("origin", "u1"), ("counter", "<u2"), ("winner", "u1"), ("bid", "<f4")])
-TASK_DTYPE = np.dtype(
-    [("origin", "u1"), ("counter", "<u2"), ("pos", "<i2", (3,)), ("dir", "u1", (3,)), ("requires", "u1")]
+RUN_DTYPE = np.dtype(
+    [("origin", "u1"), ("counter", "<u2"), ("count", "u1"), ("requires", "u1"), ("base", "<i2", (3,))]
 )
-assert ENTRY_DTYPE.itemsize == 8 and TASK_DTYPE.itemsize == 13
+RECORD_BYTES = 8
+assert ENTRY_DTYPE.itemsize == 8 and RUN_DTYPE.itemsize == 11
+_OFFSET_BITS = 13
+_OFFSET_LIMIT = (1 << (_OFFSET_BITS - 1)) - 1  # 4095 cm: how far a run's tasks lie from its base
 
 
 class MessageError(ValueError):
@@ -81,8 +90,10 @@ class Message:
         return bool(self.tasks) or len(self.keys) > 0
 
 
-def size_of(n_clocks: int, n_acks: int, n_tasks: int, n_entries: int) -> int:
-    """Bytes of a message with these counts."""
+def size_of(n_clocks: int, n_acks: int, n_tasks: int, n_entries: int, n_runs: int | None = None) -> int:
+    """Bytes of a message with these counts; the tasks in ``n_runs`` runs (default: one, if any; see
+    :func:`task_runs` for how many a list of tasks takes)."""
+    runs = min(n_tasks, 1) if n_runs is None else n_runs
     return (
         _HEADER.size
         + _POSITION.size
@@ -90,19 +101,56 @@ def size_of(n_clocks: int, n_acks: int, n_tasks: int, n_entries: int) -> int:
         + 1
         + _ACK.size * n_acks
         + 2 * _COUNT.size
-        + TASK_DTYPE.itemsize * n_tasks
+        + RUN_DTYPE.itemsize * runs
+        + RECORD_BYTES * n_tasks
         + ENTRY_DTYPE.itemsize * n_entries
         + _CRC.size
     )
 
 
-def _pack_direction(az: int, el: int) -> tuple[int, int, int]:
-    return az & 0xFF, (az >> 8 & 0x0F) | (el & 0x0F) << 4, el >> 4 & 0xFF
+def task_runs(tasks: list[Task]) -> list[list[Task]]:
+    """The runs a message packs ``tasks`` into, in key order: one origin, consecutive counters, one
+    requires mask, at most 255 tasks, each within 40.95 m of the run's first task on every axis."""
+    runs: list[list[Task]] = []
+    for task in sorted(tasks, key=lambda t: t.key):
+        if runs:
+            run = runs[-1]
+            first, last = run[0], run[-1]
+            if (
+                task.key == last.key + 1
+                and task.key >> 16 == first.key >> 16
+                and task.requires == first.requires
+                and len(run) < 255
+                and all(
+                    abs(a - b) <= _OFFSET_LIMIT
+                    for a, b in zip(task.position_cm, first.position_cm, strict=True)
+                )
+            ):
+                run.append(task)
+                continue
+        runs.append([task])
+    return runs
 
 
-def _unpack_direction(b: np.ndarray) -> tuple[int, int]:
-    b0, b1, b2 = (int(v) for v in b)
-    return b0 | (b1 & 0x0F) << 8, b1 >> 4 | b2 << 4
+def _pack_record(task: Task, base: tuple[int, int, int]) -> int:
+    mask = (1 << _OFFSET_BITS) - 1
+    word = 0
+    for axis, (value, origin) in enumerate(zip(task.position_cm, base, strict=True)):
+        word |= ((value - origin) & mask) << (_OFFSET_BITS * axis)
+    az, el = task.direction_code
+    return word | az << (3 * _OFFSET_BITS) | el << (3 * _OFFSET_BITS + 12)
+
+
+def _unpack_record(word: int, base: tuple[int, int, int]) -> tuple[tuple[int, int, int], tuple[int, int]]:
+    mask = (1 << _OFFSET_BITS) - 1
+    position = []
+    for axis in range(3):
+        offset = word >> (_OFFSET_BITS * axis) & mask
+        offset -= (1 << _OFFSET_BITS) if offset > _OFFSET_LIMIT else 0
+        position.append(base[axis] + offset)
+    az = word >> (3 * _OFFSET_BITS) & 0xFFF
+    el = word >> (3 * _OFFSET_BITS + 12) & 0xFFF
+    return tuple(position), (az, el)  # type: ignore[return-value]
 
 
 def encode(message: Message) -> bytes:
@@ -115,13 +163,14 @@ def encode(message: Message) -> bytes:
     parts.append((clocks + 1).astype("<u4").tobytes())
     parts.append(bytes([len(message.acks)]))
     parts.extend(_ACK.pack(robot, seq & 0xFFFFFFFF) for robot, seq in message.acks)
-    records = np.zeros(len(message.tasks), dtype=TASK_DTYPE)
-    for row, task in zip(records, message.tasks, strict=True):
-        row["origin"], row["counter"] = task.key >> 16, task.key & 0xFFFF
-        row["pos"] = task.position_cm
-        row["dir"] = _pack_direction(*task.direction_code)
-        row["requires"] = task.requires
-    parts += [_COUNT.pack(len(records)), records.tobytes()]
+    runs = task_runs(message.tasks)
+    parts.append(_COUNT.pack(len(runs)))
+    for run in runs:
+        head = np.zeros(1, dtype=RUN_DTYPE)
+        head["origin"], head["counter"], head["count"] = run[0].key >> 16, run[0].key & 0xFFFF, len(run)
+        head["requires"], head["base"] = run[0].requires, run[0].position_cm
+        words = np.array([_pack_record(t, run[0].position_cm) for t in run], dtype="<u8")
+        parts += [head.tobytes(), words.tobytes()]
     entries = np.zeros(len(message.keys), dtype=ENTRY_DTYPE)
     keys = np.asarray(message.keys, dtype=np.int64)
     entries["origin"], entries["counter"] = keys >> 16, keys & 0xFFFF
@@ -169,25 +218,30 @@ def decode(data: bytes) -> Message:
     n_acks = body[offset]
     offset = _take(body, start, _ACK.size * n_acks)
     acks = [_ACK.unpack_from(body, start + _ACK.size * i) for i in range(n_acks)]
-    start = _take(body, offset, 2)
-    (n_tasks,) = _COUNT.unpack_from(body, offset)
-    offset = _take(body, start, TASK_DTYPE.itemsize * n_tasks)
-    records = np.frombuffer(body, TASK_DTYPE, n_tasks, start)
+    offset = _take(body, offset, 2)
+    (n_runs,) = _COUNT.unpack_from(body, offset - 2)
+    tasks = []
+    for _ in range(n_runs):
+        start, offset = offset, _take(body, offset, RUN_DTYPE.itemsize)
+        head = np.frombuffer(body, RUN_DTYPE, 1, start)[0]
+        count, origin, first = int(head["count"]), int(head["origin"]), int(head["counter"])
+        if count == 0 or first + count > 0x10000:
+            raise MessageError("malformed", f"a run of {count} tasks from counter {first}")
+        base = tuple(int(v) for v in head["base"])
+        start, offset = offset, _take(body, offset, RECORD_BYTES * count)
+        for n, word in enumerate(np.frombuffer(body, "<u8", count, start).tolist()):
+            if word >> 63:
+                raise MessageError("malformed", "task record's spare bit set")
+            record_cm, direction = _unpack_record(int(word), base)  # type: ignore[arg-type]
+            if any(abs(v) > 32767 for v in record_cm):
+                raise MessageError("malformed", "task position out of range")
+            tasks.append(Task(origin << 16 | (first + n), record_cm, direction, int(head["requires"])))
     start = _take(body, offset, 2)
     (n_entries,) = _COUNT.unpack_from(body, offset)
     offset = _take(body, start, ENTRY_DTYPE.itemsize * n_entries)
     entries = np.frombuffer(body, ENTRY_DTYPE, n_entries, start)
     if offset != len(body):
         raise MessageError("malformed", f"{len(body) - offset} trailing bytes")
-    tasks = [
-        Task(
-            int(r["origin"]) << 16 | int(r["counter"]),
-            tuple(int(v) for v in r["pos"]),  # type: ignore[arg-type]
-            _unpack_direction(r["dir"]),
-            int(r["requires"]),
-        )
-        for r in records
-    ]
     wire = entries["winner"].astype(np.int64)
     winners = np.where(wire == _WIRE_NONE, NO_WINNER, np.where(wire == _WIRE_DONE, DONE, wire))
     bids = entries["bid"].astype(np.float64)

@@ -42,6 +42,7 @@ METRICS = {
     "messages": "messages",
     "bytes": "bytes",
     "lost": "messages lost",
+    "tasks_lost": "tasks that died with a failed robot",
 }
 WALL_CLOCK = ("realtime_factor", "wall_time_s")  # depend on the machine, not on the seed
 

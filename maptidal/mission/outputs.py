@@ -295,6 +295,12 @@ def mission_metrics(document: dict) -> dict:
         "lost": None if comms is None else int(comms.get("lost", 0)),
         "realtime_factor": document.get("realtime_factor"),
         "wall_time_s": document.get("wall_time_s"),
+        # tasks found by robots that failed, which no live robot holds, did or found again (None: unknown)
+        "tasks_lost": (
+            None
+            if "tasks_lost" not in document
+            else sum(row["lost"] for row in document["tasks_lost"].values())
+        ),
     }
 
 
@@ -316,6 +322,7 @@ def report_markdown(document: dict) -> str:
         ),
         "",
         *verification_lines(document),
+        *sharing_lines(document),
         *localisation_lines(document),
         *timing_lines(document),
         "![top view](top_view.png)",
@@ -342,6 +349,59 @@ def verification_lines(document: dict) -> list[str]:
         share = f"{100.0 * verified / claimed:.0f} %" if claimed else "n/a"
         rows.append(f"| {name} | {claimed} | {verified} | {share} |")
     return ["## Done and seen", "", *rows, ""]
+
+
+def sharing_lines(document: dict) -> list[str]:
+    """``report.md``'s tables of how fast each robot's discoveries reached a teammate and, per failed
+    robot, what its discoveries came to (``mission.json``'s ``sharing`` and ``tasks_lost``); none for a
+    document without them."""
+    sharing = document.get("sharing")
+    if not sharing:
+        return []
+
+    def seconds(value) -> str:
+        return "n/a" if value is None else f"{value:.1f}"
+
+    rows = [
+        "| finder | found | heard by a teammate | never heard | delay median / p90 / max (s) |",
+        "|---|---|---|---|---|",
+    ]
+    for name, row in sharing.items():
+        delay = row["delay"]
+        rows.append(
+            f"| {name} | {row['found']} | {row['heard']} | {row['unheard']} | "
+            f"{seconds(delay['median_s'])} / {seconds(delay['p90_s'])} / {seconds(delay['max_s'])} |"
+        )
+    lines = [
+        "## Sharing what was found",
+        "",
+        "How long each robot's discoveries took to reach a teammate over the acoustic channel.",
+        "",
+        *rows,
+        "",
+    ]
+    lost = document.get("tasks_lost")
+    if lost:
+        rows = [
+            "| failed robot | failed at (s) | found | done | inherited | rediscovered | lost |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for name, row in lost.items():
+            rows.append(
+                f"| {name} | {row['failed_at_s']:.1f} | {row['found']} | {row['done']} | {row['inherited']} "
+                f"| {row['rediscovered']} | {row['lost']} ({row['lost_pct']:.1f} %) |"
+            )
+        lines += [
+            "## Tasks lost with a failed robot",
+            "",
+            "Of the tasks a robot found before it failed: done by someone; inherited (a live teammate holds "
+            "the task); rediscovered (a live teammate found a view within the task's tolerances); lost "
+            "(none of these).",
+            "",
+            *rows,
+            "",
+        ]
+    return lines
 
 
 def timing_lines(document: dict) -> list[str]:
@@ -387,6 +447,7 @@ def summary_table(document: dict) -> str:
         # a snapshot of the auction, not a fault: on a slow channel two bundles may hold a task for a while
         ("tasks in two bundles at the end", str(document.get("allocation_conflicts", "n/a"))),
         ("walls uninspected (occluded)", f"{m['pct_uninspected']:.1f} %"),
+        *([("tasks lost with failed robots", str(m["tasks_lost"]))] if document.get("tasks_lost") else []),
         (
             "messages / bytes / lost",
             "unknown" if m["messages"] is None else f"{m['messages']} / {m['bytes']} / {m['lost']}",

@@ -64,6 +64,7 @@ from maptidal.free_space import free_space_mask
 from maptidal.mission.capture import camera_pose_from_body
 from maptidal.mission.outputs import MissionWriter
 from maptidal.mission.perception import FrameJob, FrameResult, start_perception
+from maptidal.mission.sharing import sharing_table, tasks_lost
 from maptidal.mission.verification import check_view, pitch_to_fly, view_pitch
 from maptidal.mission.video import MissionVideo
 from maptidal.perception.frontend import POSE_SOURCES, FrontEnd, FrontEndParams
@@ -278,6 +279,7 @@ class _Robot:
     launch: tuple[np.ndarray, float] | None = None  # a joining robot's parking pose (position, yaw)
     last_left: np.ndarray | None = None  # the latest left image, for the video's inset
     visual_updates: int = 0  # the front end's visual fixes, as of the latest frame result taken
+    failed_at_s: float | None = None  # when a scripted failure took it
 
     @property
     def active(self) -> bool:
@@ -715,7 +717,7 @@ class Mission:
     def _apply(self, event: MissionEvent, now: float) -> None:
         if event.kind == "fail":
             robot = self.robots[event.robot]
-            robot.activity = "failed"
+            robot.activity, robot.failed_at_s = "failed", now
             self.auction.agents[robot.index].alive = False
             self.writer.event(now, "fail", robot=robot.name)
         elif event.kind == "join":
@@ -975,6 +977,23 @@ class Mission:
         """The true camera viewpoints ``(N, 6)`` of the verified task images (the ones scored)."""
         return np.array(self.captured).reshape(-1, 6)
 
+    def _sharing(self) -> dict:
+        """How fast each robot's discoveries reached a teammate, and what each failed robot's
+        discoveries came to (:mod:`maptidal.mission.sharing`)."""
+        learned = {
+            r.name: self.auction.agents[r.index].learned_s
+            for r in self.robots.values()
+            if r.index in self.auction.agents
+        }
+        failed = {r.name: r.failed_at_s for r in self.robots.values() if r.failed_at_s is not None}
+        tasks = list(self.tasks.values())
+        return {
+            "sharing": sharing_table(tasks, learned, failed),
+            "tasks_lost": tasks_lost(
+                tasks, learned, failed, self.params.position_tolerance_m, self.params.direction_tolerance_deg
+            ),
+        }
+
     def document(self, now: float, wall_s: float, finished: bool) -> dict:
         """The ``mission.json`` document as of now."""
         stats = self.auction.channel.stats
@@ -1003,6 +1022,7 @@ class Mission:
             # captures of a task already captured (by this robot or another): what a conflict costs
             "duplicate_inspections": sum(n - 1 for n in self.inspections.values()),
             "tasks": sorted(self.tasks.values(), key=lambda t: t["id"]),
+            **self._sharing(),
             # each stage's own time, wherever it ran; "parallel" says what ran beside the loop
             "timing": {**self.timing, "rendering": self.timing["rendering"] + self._frames_render_s},
             "parallel": {

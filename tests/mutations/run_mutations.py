@@ -1,5 +1,5 @@
 """Re-run the mutation lists of tests/README.md (M: physics, F: flight modes and estimator, V: done means
-seen, L: localisation): apply each
+seen, L: localisation, S: sharing discoveries): apply each
 mutation to the source, run its group's tests, record which test fails first, and restore the file.
 Every mutation must be killed.
 
@@ -32,7 +32,14 @@ FLIGHT_TESTS = [
 ]
 VERIFICATION_TESTS = ["tests/test_done_means_seen.py", "tests/test_mission.py"]
 LOCALISATION_TESTS = ["tests/test_relocalisation.py", "tests/test_localisation_loop.py"]
-TESTS_OF_GROUP = {"M": TESTS, "F": FLIGHT_TESTS, "V": VERIFICATION_TESTS, "L": LOCALISATION_TESTS}
+SHARING_TESTS = ["tests/test_sharing.py", "tests/test_allocation.py"]
+TESTS_OF_GROUP = {
+    "M": TESTS,
+    "F": FLIGHT_TESTS,
+    "V": VERIFICATION_TESTS,
+    "L": LOCALISATION_TESTS,
+    "S": SHARING_TESTS,
+}
 
 # id: (description, [(file, old, new), ...])
 MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
@@ -401,6 +408,71 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
     "L10": (
         "the drift rate never adapts to surprising fixes",
         [("maptidal/perception/odometry.py", "if normalised > 2.0:", "if False:")],
+    ),
+    "S1": (
+        "a robot's own discoveries leave newest first",
+        [
+            (
+                "maptidal/allocation/agent.py",
+                "own = [slot for slot in lacking if self._keys[slot] >> 16 == self.index]",
+                "own = [slot for slot in lacking if self._keys[slot] >> 16 == self.index][::-1]",
+            )
+        ],
+    ),
+    "S2": (
+        "records after every bid entry (the version-2 priorities)",
+        [
+            (
+                "maptidal/allocation/agent.py",
+                "        items += [(None, slot) for slot in own]\n",
+                "",
+            ),
+            (
+                "maptidal/allocation/agent.py",
+                "for slot in rest if slot not in on_path]\n",
+                "for slot in rest if slot not in on_path]\n        items += [(None, slot) for slot in own]\n",
+            ),
+        ],
+    ),
+    "S3": (
+        "relayed records before the robot's own",
+        [
+            (
+                "maptidal/allocation/agent.py",
+                "        items += [(None, slot) for slot in own]\n",
+                "        items += [(None, slot) for slot in lacking"
+                " if self._keys[slot] >> 16 != self.index]\n"
+                "        items += [(None, slot) for slot in own]\n",
+            )
+        ],
+    ),
+    "S4": (
+        "an overheard ack says nothing",
+        [("maptidal/allocation/agent.py", "if robot != self.index and overheard is not None:", "if False:")],
+    ),
+    "S5": (
+        "a run's offsets not sign-extended",
+        [
+            (
+                "maptidal/allocation/messages.py",
+                "offset -= (1 << _OFFSET_BITS) if offset > _OFFSET_LIMIT else 0",
+                "offset -= 0",
+            )
+        ],
+    ),
+    "S6": (
+        "a task no live robot holds counts as inherited",
+        [("maptidal/mission/sharing.py", 'elif task["id"] in held_alive:', "elif True:")],
+    ),
+    "S7": (
+        "a rediscovery's direction not checked",
+        [
+            (
+                "maptidal/mission/sharing.py",
+                'kind = "rediscovered" if bool(((near <= position_tolerance_m) & aligned).any())',
+                'kind = "rediscovered" if bool((near <= position_tolerance_m).any())',
+            )
+        ],
     ),
 }
 
