@@ -78,9 +78,7 @@ def inside_tank(tank: TankModel, point: np.ndarray, margin: float = 0.0) -> bool
     x, y, z = (float(v) for v in point)
     if not margin <= z <= tank.height - margin:
         return False
-    c = tank.config
-    far_x = min(float(seg.start[0]) for seg in tank.segments) - (c.side_length - c.side_evaluated_length)
-    if x < far_x + margin:
+    if x < tank.far_x + margin:
         return False
     # inside every wall's half-plane (the walls of the modelled end form a convex outline)
     for seg in tank.segments:

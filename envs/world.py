@@ -112,7 +112,8 @@ def _add_quad(body, corners: np.ndarray, normal: np.ndarray, material: str, coll
 
 
 def build_tank_spec(tank: TankModel, textures: TextureParams | None = None) -> mujoco.MjSpec:
-    """The tank as an MjSpec: walls, window (glass and frame), ladder, fouling, floor, lights."""
+    """The tank as an MjSpec: walls (the far end wall that closes the tank too), window (glass, frame
+    and the dark room behind it), ladder, fouling, floor, lights."""
     textures = textures or TextureParams()
     spec = mujoco.MjSpec()
     spec.modelname = tank.config.name
@@ -133,11 +134,9 @@ def build_tank_spec(tank: TankModel, textures: TextureParams | None = None) -> m
     _add_material(spec, "steel", rgba=[0.72, 0.72, 0.75, 1.0], specular=0.8, shininess=0.6)
     world = spec.worldbody
     for corners, normal, kind in tank.scene_quads(include_floor=True):
-        material = {"pane": "glass", "floor": "floor"}.get(kind, "wall")
-        _add_quad(world, corners, normal, material)
-        if kind == "pane":  # the dark observation room behind the glass
-            back = corners - 0.3 * np.asarray(normal)
-            _add_quad(world, back, normal, "window_frame", collide=False)
+        # the room behind the glass is dark and out of reach (the pane in front of it collides)
+        material = {"pane": "glass", "floor": "floor", "room": "window_frame"}.get(kind, "wall")
+        _add_quad(world, corners, normal, material, collide=kind != "room")
     if tank.has_window():
         _add_window_frame(world, tank)
     for centre, half, axes in tank.ladder_boxes():

@@ -5,8 +5,9 @@ above the surface or behind a wall (its direction points at a CIP, wherever the 
 it). This module classifies tasks, and offers the optional check that ``maptidal compare --free-space``
 and ``sweep --free-space`` apply (off by default, as the paper has none):
 
-- *in the water*: between the floor (z = 0) and the surface (z = water depth), and on the water's side
-  of every wall of the tank's evaluated region (the walls form a convex outline);
+- *in the water*: between the floor (z = 0) and the surface (z = water depth), on the water's side
+  of every wall of the tank's evaluated region (the walls form a convex outline) and of the far end
+  wall;
 - *line of sight*: the segment from the task to its target, ``standoff`` (L_i) along its direction,
   meets no wall, floor or ladder more than ``tolerance`` before the target.
 
@@ -34,7 +35,7 @@ def classify_tasks(
     positions = tasks[:, :3]
     labels[positions[:, 2] <= 0.0] = "below_floor"
     labels[(labels == "free") & (positions[:, 2] >= tank.height)] = "above_surface"
-    water_side = np.ones(len(tasks), bool)
+    water_side = positions[:, 0] > tank.far_x
     for segment in tank.segments:
         offset = positions[:, :2] - segment.start
         water_side &= offset @ segment.inward_normal[:2] > 0.0

@@ -160,7 +160,10 @@ def tank_landmarks(tank: TankModel, features: FeatureParams | None = None) -> np
         direction = axes[long_axis] * half[long_axis]
         front = centre + half[1] * axes[1]
         parts.append(_sample_segment(front - direction, front + direction, features.ladder_per_m, rng))
-    parts.append(_sample_triangles(tank.scene_triangles(include_ladder=False), features.flat_per_m2, rng))
+    # flat texture on the surfaces of the inspected end: the room behind the glass is unlit and the far
+    # end wall lies beyond any synthetic camera's range, so neither has features
+    flat = tank.scene_triangles(include_ladder=False, include_enclosure=False)
+    parts.append(_sample_triangles(flat, features.flat_per_m2, rng))
     for patch in tank.config.fouling:
         count = rng.poisson(features.fouling_per_m2 * math.pi * patch.radius**2)
         radius = patch.radius * np.sqrt(rng.uniform(size=count))

@@ -10,7 +10,8 @@ it this module builds
   by the baselines and to place fouling;
 - the *evaluated surface* as a trimesh mesh (walls and window recess; not the floor,
   the water surface or the ladder, as in the paper's Section IV.B);
-- the *scene*: everything a camera can see (all walls, floor, ladder), for ray casts.
+- the *scene*: everything a camera can see (all walls, floor, ladder, the far end wall that closes the
+  tank and the dark room behind the window glass), for ray casts.
 
 Frame: origin on the floor at the centre of the end wall, x from the water into
 the end wall (the wall lies in ``x = 0``), y to the left when facing it, z up.
@@ -32,6 +33,11 @@ from maptidal.paths import asset
 from maptidal.raycast import Occluders
 
 DEFAULT_TANK_CONFIG = asset("osb_tank", "tank.toml")
+# The unlit observation room behind the window: its back wall stands this far behind the glass. Our
+# stand-in (assets/osb_tank/README.md): through the glass a camera sees a dark plane, and the front end
+# meshes it, so it is a surface of the scene (the mesh error is measured against it), not of the
+# inspected region.
+ROOM_DEPTH_M = 0.3
 
 
 class TankConfigError(ValueError):
@@ -332,6 +338,19 @@ class TankModel:
                 s += length
         return segments
 
+    @property
+    def far_x(self) -> float:
+        """x of the far end wall: where the side walls end (``side_walls.length`` beyond the angled walls).
+        The tank is closed there."""
+        c = self.config
+        return -c.angled_length * math.sin(math.radians(c.angled_angle_deg)) - c.side_length
+
+    @property
+    def half_width(self) -> float:
+        """Half the distance between the side walls (m)."""
+        c = self.config
+        return c.end_wall_width / 2 + c.angled_length * math.cos(math.radians(c.angled_angle_deg))
+
     def baseline_geometry(self) -> TankModel:
         """The tank the baselines lay their points on: this one, with each side wall's part cut to
         ``side_baseline_length`` where that is set (the paper's Fig. 6A: generation geometry and
@@ -479,13 +498,18 @@ class TankModel:
             z += ladder.rung_spacing
         return boxes
 
-    def scene_quads(self, include_floor: bool = True) -> list[tuple[np.ndarray, np.ndarray, str]]:
+    def scene_quads(
+        self, include_floor: bool = True, include_enclosure: bool = True
+    ) -> list[tuple[np.ndarray, np.ndarray, str]]:
         """Every flat surface a camera in the water can see: ``(corners (4, 3), normal, kind)``.
 
         ``kind`` is "wall", "pane" (the window glass), "reveal" (the window recess
-        sides) or "floor". The whole side walls are included, not only their
-        evaluated part, and the floor under the modelled end of the tank; the water
-        surface and the ladder (see :meth:`ladder_boxes`) are not.
+        sides), "room" (the dark back wall of the room behind the glass, :data:`ROOM_DEPTH_M`
+        behind it) or "floor". The whole side walls are included, not only their
+        evaluated part, with the far end wall that closes the tank where they end
+        (:attr:`far_x`), and the floor of the whole tank; the water surface and the
+        ladder (see :meth:`ladder_boxes`) are not. ``include_enclosure=False`` leaves out
+        the far end wall and the room, the surfaces beyond the inspected end.
         """
         c = self.config
         quads: list[tuple[np.ndarray, np.ndarray, str]] = []
@@ -497,15 +521,26 @@ class TankModel:
                 elif seg.name == "end" and self.has_window() and k > 4:
                     kind = "reveal"
                 quads.append((corners, normal, kind))
-        far_x = min(float(seg.start[0]) for seg in self.segments) - (c.side_length - c.side_evaluated_length)
+                if kind == "pane" and include_enclosure:
+                    quads.append((corners - ROOM_DEPTH_M * np.asarray(normal), normal, "room"))
+        far_x, side_y = self.far_x, self.half_width
         near_x = min(float(min(seg.start[0], seg.end[0])) for seg in self.segments)
-        side_y = max(abs(float(seg.start[1])) for seg in self.segments)
         if c.side_length > c.side_evaluated_length:
             for sign in (1.0, -1.0):
                 a = np.array([near_x, sign * side_y, 0.0])
                 b = np.array([far_x, sign * side_y, 0.0])
                 corners = np.array([a, b, b + [0, 0, self.height], a + [0, 0, self.height]])
                 quads.append((corners, np.array([0.0, -sign, 0.0]), "wall"))
+        if include_enclosure:
+            corners = np.array(
+                [
+                    [far_x, side_y, 0.0],
+                    [far_x, -side_y, 0.0],
+                    [far_x, -side_y, self.height],
+                    [far_x, side_y, self.height],
+                ]
+            )
+            quads.append((corners, np.array([1.0, 0.0, 0.0]), "wall"))
         if include_floor:
             corners = np.array(
                 [[far_x, -side_y, 0.0], [0.0, -side_y, 0.0], [0.0, side_y, 0.0], [far_x, side_y, 0.0]]
@@ -518,12 +553,14 @@ class TankModel:
         """:meth:`scene_triangles` (floor and ladder included) prepared for ray casting, once per tank."""
         return Occluders.of(self.scene_triangles())
 
-    def scene_triangles(self, include_floor: bool = True, include_ladder: bool = True) -> np.ndarray:
+    def scene_triangles(
+        self, include_floor: bool = True, include_ladder: bool = True, include_enclosure: bool = True
+    ) -> np.ndarray:
         """Every surface a camera in the water can see, as triangles ``(T, 3, 3)``.
 
         The surfaces of :meth:`scene_quads` plus, optionally, the ladder.
         """
-        quads = [(corners, normal) for corners, normal, _ in self.scene_quads(include_floor)]
+        quads = [(c, n) for c, n, _ in self.scene_quads(include_floor, include_enclosure)]
         triangles = [self._quads_to_mesh(quads).triangles]
         if include_ladder:
             triangles += [_box_triangles(*box) for box in self.ladder_boxes()]

@@ -33,7 +33,7 @@ def brute_force_hits(origins: np.ndarray, directions: np.ndarray, triangles: np.
         q = np.cross(s, e1[None])
         v = np.einsum("rk,rtk->rt", directions, q) * inv
         t = np.einsum("tk,rtk->rt", e2, q) * inv
-    ok = (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-9)
+        ok = (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-9)
     return np.where(ok, t, np.inf).min(axis=1)
 
 

@@ -1,5 +1,5 @@
 """Re-run the mutation lists of tests/README.md (M: physics, F: flight modes and estimator, V: done means
-seen, L: localisation, S: sharing discoveries): apply each
+seen, L: localisation, S: sharing discoveries, T: the closed tank): apply each
 mutation to the source, run its group's tests, record which test fails first, and restore the file.
 Every mutation must be killed.
 
@@ -33,12 +33,14 @@ FLIGHT_TESTS = [
 VERIFICATION_TESTS = ["tests/test_done_means_seen.py", "tests/test_mission.py"]
 LOCALISATION_TESTS = ["tests/test_relocalisation.py", "tests/test_localisation_loop.py"]
 SHARING_TESTS = ["tests/test_sharing.py", "tests/test_allocation.py"]
+TANK_TESTS = ["tests/test_closed_tank.py", "tests/test_world_geometry.py"]
 TESTS_OF_GROUP = {
     "M": TESTS,
     "F": FLIGHT_TESTS,
     "V": VERIFICATION_TESTS,
     "L": LOCALISATION_TESTS,
     "S": SHARING_TESTS,
+    "T": TANK_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -473,6 +475,44 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 'kind = "rediscovered" if bool((near <= position_tolerance_m).any())',
             )
         ],
+    ),
+    "T1": (
+        "no far end wall",
+        [
+            (
+                "maptidal/tank.py",
+                "        if include_enclosure:\n            corners = np.array(",
+                "        if False:\n            corners = np.array(",
+            )
+        ],
+    ),
+    "T2": (
+        "the far end wall where the evaluated side walls end",
+        [
+            (
+                "maptidal/tank.py",
+                "math.radians(c.angled_angle_deg)) - c.side_length",
+                "math.radians(c.angled_angle_deg)) - c.side_evaluated_length",
+            )
+        ],
+    ),
+    "T3": (
+        "no room behind the glass",
+        [("maptidal/tank.py", 'if kind == "pane" and include_enclosure:', "if False:")],
+    ),
+    "T4": (
+        "the free-space check ignores the far end wall",
+        [
+            (
+                "maptidal/free_space.py",
+                "water_side = positions[:, 0] > tank.far_x",
+                "water_side = positions[:, 0] > -np.inf",
+            )
+        ],
+    ),
+    "T5": (
+        "the far end wall drawn but not solid",
+        [("envs/world.py", 'collide=kind != "room")', 'collide=kind not in ("room", "wall"))')],
     ),
 }
 
