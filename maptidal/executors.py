@@ -13,6 +13,12 @@ everything they draw from the item), so the same items give the same results loc
 
 An optional ``initializer(*initargs)`` runs once in each worker process before its first run (the sweep
 uses it to build its keyframes and coverage model once per process rather than once per cell).
+
+Ctrl-C and SIGTERM are the parent's to handle. Local workers start with both held (:func:`signals_held`:
+a Ctrl-C at a terminal reaches the whole process group, and a spawned child that it catches while it
+reads its start-up data dies with a traceback of its own), then ignore SIGINT and take SIGTERM again
+(:func:`release_in_child`); when the parent is interrupted it terminates the runs under way rather than
+waiting for them, which for a batch of missions could take minutes.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ import signal
 import uuid
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from contextlib import contextmanager
 from typing import Any
 
 EXECUTORS = ("local", "ray")
@@ -30,6 +37,27 @@ EXECUTORS = ("local", "ray")
 WORKER_ENVIRONMENT = ("MUJOCO_GL", "PYOPENGL_PLATFORM")
 
 _initialised: set[str] = set()  # the initializer tokens already run in this (worker) process
+# SIGALRM too: maptidal.cli.interrupts raises a Ctrl-C that came during an import on a timer
+HELD_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGALRM}
+
+
+@contextmanager
+def signals_held() -> Iterator[None]:
+    """Hold (block) SIGINT, SIGTERM and SIGALRM in this thread while child processes start; one that came
+    meanwhile is delivered when the block ends. The children inherit the block: they call
+    :func:`release_in_child` once they are running."""
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def release_in_child() -> None:
+    """In a child started under :func:`signals_held`: ignore SIGINT (Ctrl-C reaches the whole process
+    group, and it is the parent's to handle), and let SIGTERM end the child again."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, HELD_SIGNALS)
 
 
 def usable_jobs(jobs: int, runs: int) -> int:
@@ -38,7 +66,7 @@ def usable_jobs(jobs: int, runs: int) -> int:
 
 
 def _local_worker_setup(initializer: Callable | None, initargs: tuple) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    release_in_child()
     if initializer is not None:
         initializer(*initargs)
 
@@ -91,12 +119,18 @@ def _run_in_processes(function, items, jobs, initializer, initargs) -> Iterator[
         initargs=(initializer, initargs),
     )
     try:
-        futures = {pool.submit(function, item): index for index, item in enumerate(items)}
+        with signals_held():  # the workers are spawned as the runs are submitted
+            futures = {pool.submit(function, item): index for index, item in enumerate(items)}
         pending = set(futures)
         while pending:
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
             for future in sorted(finished, key=futures.get):
                 yield futures[future], future.result()
+    except BaseException:
+        # interrupted, or the caller stopped early: end the runs under way rather than wait for them
+        for process in list((pool._processes or {}).values()):
+            process.terminate()
+        raise
     finally:
         pool.shutdown(cancel_futures=True)
 

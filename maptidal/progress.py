@@ -10,6 +10,14 @@ import sys
 import time
 from typing import TextIO
 
+_open_bars: set[int] = set()  # the interactive bars whose line is drawn and not yet ended
+
+
+def line_open() -> bool:
+    """Whether a progress bar on a terminal has drawn a line it has not ended (a message printed now
+    should start on a new line)."""
+    return bool(_open_bars)
+
 
 class ProgressBar:
     """Count ``total`` steps of work labelled ``label``; call :meth:`advance` per step."""
@@ -39,6 +47,10 @@ class ProgressBar:
         if self._interactive:
             end = "\n" if self.done == self.total else ""
             self.stream.write("\r" + line.ljust(100)[:100] + end)
+            if end:
+                _open_bars.discard(id(self))
+            else:
+                _open_bars.add(id(self))
             self.stream.flush()
             return
         tenth = int(fraction * 10)

@@ -11,7 +11,6 @@ from pathlib import Path
 from maptidal.discovery import DiscoveryParams
 
 EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 130
 
 
 class RunError(Exception):

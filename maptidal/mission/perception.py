@@ -16,7 +16,6 @@ from __future__ import annotations
 import dataclasses
 import multiprocessing
 import queue
-import signal
 import threading
 import time
 import traceback
@@ -26,6 +25,7 @@ import cv2
 import numpy as np
 
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
+from maptidal.executors import release_in_child, signals_held
 from maptidal.perception.frontend import FrontEnd
 from maptidal.perception.recording import CameraPose
 
@@ -145,7 +145,7 @@ def _serve(connection, blocks: dict, shape: tuple) -> None:
     come and send back each result (or the error). A job's images are in its robot's shared block, which
     the mission leaves alone until the result is back."""
     # Ctrl-C is the mission's to handle: it closes the pipe, and this process then ends on its own
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    release_in_child()
     # one OpenCV thread: the second core is this process's, the first the mission's and its renderer's
     cv2.setNumThreads(1)
     images = _image_views(blocks, shape)
@@ -199,7 +199,8 @@ class PerceptionProcess:
         self._process = context.Process(
             target=_serve, args=(child, blocks, self._shape), name="maptidal-perception", daemon=True
         )
-        self._process.start()
+        with signals_held():  # a signal while the child reads its start-up data would give it a traceback
+            self._process.start()
         child.close()
         self.pid = self._process.pid
         self._in_flight: list[str] = []

@@ -1,5 +1,5 @@
 """Re-run the mutation lists of tests/README.md (M: physics, F: flight modes and estimator, V: done means
-seen, L: localisation, S: sharing discoveries, T: the closed tank): apply each
+seen, L: localisation, S: sharing discoveries, T: the closed tank, I: interrupts): apply each
 mutation to the source, run its group's tests, record which test fails first, and restore the file.
 Every mutation must be killed.
 
@@ -34,6 +34,7 @@ VERIFICATION_TESTS = ["tests/test_done_means_seen.py", "tests/test_mission.py"]
 LOCALISATION_TESTS = ["tests/test_relocalisation.py", "tests/test_localisation_loop.py"]
 SHARING_TESTS = ["tests/test_sharing.py", "tests/test_allocation.py"]
 TANK_TESTS = ["tests/test_closed_tank.py", "tests/test_world_geometry.py"]
+SIGNAL_TESTS = ["tests/test_signals.py"]
 TESTS_OF_GROUP = {
     "M": TESTS,
     "F": FLIGHT_TESTS,
@@ -41,6 +42,7 @@ TESTS_OF_GROUP = {
     "L": LOCALISATION_TESTS,
     "S": SHARING_TESTS,
     "T": TANK_TESTS,
+    "I": SIGNAL_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -513,6 +515,28 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
     "T5": (
         "the far end wall drawn but not solid",
         [("envs/world.py", 'collide=kind != "room")', 'collide=kind not in ("room", "wall"))')],
+    ),
+    "I1": (
+        "a signal raised at once, even during an import",
+        [("maptidal/cli/interrupts.py", "        if at_a_bad_moment(frame):", "        if False:")],
+    ),
+    "I2": (
+        "a signal raised while a child process starts",
+        [("maptidal/cli/interrupts.py", "or _STARTING_A_CHILD in name", "or False")],
+    ),
+    "I3": (
+        "an interrupted batch waits for its runs",
+        [("maptidal/executors.py", "            process.terminate()\n", "            pass\n")],
+    ),
+    "I4": (
+        "the handlers not put back",
+        [
+            (
+                "maptidal/cli/interrupts.py",
+                "            signal.signal(number, handler)  # type: ignore[arg-type]",
+                "            pass",
+            )
+        ],
     ),
 }
 

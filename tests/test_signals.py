@@ -1,0 +1,178 @@
+"""Ctrl-C and SIGTERM at any moment (issue [signals]): from the first instruction, through the imports
+(where trimesh's import guards used to swallow a Ctrl-C, and a half-made scipy raised a NameError), the
+start of the perception worker and of a batch's worker processes, to the run itself. Every outcome is
+one line on stderr (besides progress lines), status 130 for SIGINT and 143 for SIGTERM, no traceback
+from the command or any child, and no process of the command's left behind."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from maptidal.cli.interrupts import Interrupts, at_a_bad_moment
+
+SCRIPT = Path(sys.executable).with_name("maptidal")
+
+
+def _command(*args: str) -> list[str]:
+    # the console script a user runs, where it is installed; else the same entry point through -m
+    return [str(SCRIPT), *args] if SCRIPT.exists() else [sys.executable, "-m", "maptidal.cli", *args]
+
+
+def _group_gone(pgid: int, within_s: float) -> bool:
+    deadline = time.monotonic() + within_s
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def _signal_at(args: list[str], number: int, delay_s: float) -> tuple[int, list[str], str, bool]:
+    """Run the command in a session of its own, send ``number`` after ``delay_s``; its status, the stderr
+    lines that are not progress lines, all of stderr, and whether every process of it has ended."""
+    process = subprocess.Popen(
+        _command(*args), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
+    time.sleep(delay_s)
+    process.send_signal(number)
+    try:
+        _, err = process.communicate(timeout=90)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGKILL)
+        _, err = process.communicate()
+        return -1, ["<hung>"], err, False
+    gone = _group_gone(process.pid, 10.0)
+    if not gone:
+        os.killpg(process.pid, signal.SIGKILL)
+    lines = [line for line in err.splitlines() if line.strip() and " [" not in line.split(":")[0]]
+    return process.returncode, lines, err, gone
+
+
+# moments drawn once over 0 to 3 s (seeded, so that a failure can be repeated), the import's first
+# second sampled densely: that is where the command used to lose the signal
+MOMENTS = sorted(
+    np.random.default_rng(20261204).uniform([0.0] * 4 + [1.0] * 3, [1.0] * 4 + [3.0] * 3).round(2)
+)
+
+
+@pytest.mark.parametrize("delay_s", MOMENTS)
+def test_ctrl_c_at_any_moment_of_a_mission_is_one_line_and_130(delay_s, tmp_path):
+    status, lines, err, gone = _signal_at(
+        ["run", "--duration", "60", "--out", str(tmp_path / "mission")], signal.SIGINT, delay_s
+    )
+    assert status == 130, err
+    assert len(lines) == 1 and "interrupted" in lines[0], err
+    assert "Traceback" not in err and "Error" not in err, err
+    assert gone, "a process of the mission outlived it"
+
+
+@pytest.mark.parametrize("delay_s", [0.4, 2.0])
+def test_sigterm_on_a_mission_is_one_line_and_143(delay_s, tmp_path):
+    status, lines, err, gone = _signal_at(
+        ["run", "--duration", "60", "--out", str(tmp_path / "mission")], signal.SIGTERM, delay_s
+    )
+    assert status == 143, err
+    assert len(lines) == 1 and "terminated (SIGTERM)" in lines[0], err
+    assert "Traceback" not in err, err
+    assert gone
+
+
+def test_ctrl_c_on_a_parallel_batch_stops_its_workers_at_once(tmp_path):
+    # the batch's missions are long (120 s simulated each): waiting for them would take a minute or more
+    start = time.monotonic()
+    status, lines, err, gone = _signal_at(
+        ["batch", "--seeds", "1-2", "--duration", "120", "--jobs", "2", "--out", str(tmp_path / "batch")],
+        signal.SIGINT,
+        4.0,
+    )
+    assert status == 130, err
+    assert len(lines) == 1 and "maptidal batch: interrupted" in lines[0], err
+    assert "Traceback" not in err, err
+    assert gone, "a worker of the batch outlived it"
+    assert time.monotonic() - start < 30.0
+
+
+def test_a_run_interrupted_in_the_loop_says_how_to_rebuild_its_report(tmp_path):
+    out = tmp_path / "mission"
+    process = subprocess.Popen(
+        _command("run", "--duration", "60", "--out", str(out)),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    first = process.stderr.readline()  # the progress bar's first line: the loop is running
+    assert first.startswith("mission ["), first
+    process.send_signal(signal.SIGINT)
+    rest = process.stderr.read()
+    assert process.wait(timeout=60) == 130
+    assert f"`maptidal report {out}` rebuilds the report" in rest
+    assert (out / "events.jsonl").exists()
+
+
+def test_a_signal_during_an_import_waits_for_the_import_to_end():
+    # the handler itself, in this process: a SIGINT that comes while a module is being imported is held
+    # back until the import is over (a retry on SIGALRM), then raised once; a second is ignored
+    import importlib
+    import textwrap
+
+    folder = Path(__import__("tempfile").mkdtemp())
+    (folder / "slow_module_for_signals.py").write_text(
+        textwrap.dedent(
+            """
+            import os, signal, time
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.1)  # the signal's handler has run by now
+                REACHED_THE_END = True
+            except BaseException:  # as trimesh's import guards do
+                REACHED_THE_END = "swallowed"
+            """
+        )
+    )
+    sys.path.insert(0, str(folder))
+    caught = False
+    try:
+        with Interrupts() as interrupts:
+            try:
+                module = importlib.import_module("slow_module_for_signals")
+                time.sleep(0.5)  # the retry raises here, once the import is over
+            except KeyboardInterrupt:
+                caught = True
+            os.kill(os.getpid(), signal.SIGINT)  # a second signal while winding down: ignored
+            time.sleep(0.05)
+    finally:
+        sys.path.remove(str(folder))
+        sys.modules.pop("slow_module_for_signals", None)
+    assert module.REACHED_THE_END is True  # the import was not cut short
+    assert caught and interrupts.received == signal.SIGINT and interrupts.status == 130
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handlers are put back
+
+
+def test_bad_moments_are_imports_and_starting_a_child():
+    import inspect
+
+    assert not at_a_bad_moment(inspect.currentframe())
+    seen = {}
+
+    class Probe:
+        def __reduce__(self):  # pickled by multiprocessing's Popen while it starts the child
+            seen["frame"] = at_a_bad_moment(inspect.currentframe())
+            return (int, (0,))
+
+    import multiprocessing
+
+    context = multiprocessing.get_context("spawn")
+    process = context.Process(target=int, args=(Probe(),))
+    process.start()
+    process.join(timeout=60)
+    assert seen["frame"] is True
