@@ -176,3 +176,31 @@ def test_bad_moments_are_imports_and_starting_a_child():
     process.start()
     process.join(timeout=60)
     assert seen["frame"] is True
+
+
+def test_an_interrupted_video_is_left_playable_and_the_report_says_it_was_cut_short(tmp_path):
+    import cv2
+
+    out = tmp_path / "mission"
+    process = subprocess.Popen(
+        _command("run", "--duration", "60", "--video", "--out", str(out)),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    for _ in range(3):  # a few simulated seconds in: some frames of the video are written
+        line = process.stderr.readline()
+        assert line.startswith("mission ["), line
+    process.send_signal(signal.SIGINT)
+    rest = process.stderr.read()
+    assert process.wait(timeout=60) == 130
+    assert "Traceback" not in rest and "Exception ignored" not in rest, rest  # the renderer freed in time
+    assert not (out / "mission.mp4").exists()
+    video = cv2.VideoCapture(str(out / "mission.part.mp4"))
+    frames = 0
+    while video.read()[0]:
+        frames += 1
+    assert frames > 0
+    rebuilt = subprocess.run(_command("report", str(out)), capture_output=True, text=True, timeout=120)
+    assert rebuilt.returncode == 0, rebuilt.stderr
+    assert "`mission.part.mp4`, cut short" in (out / "report.md").read_text()

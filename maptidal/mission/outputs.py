@@ -321,6 +321,7 @@ def report_markdown(document: dict) -> str:
             else f"{m['messages']} messages, {m['bytes']} bytes, {m['lost']} lost."
         ),
         "",
+        *video_lines(document),
         *verification_lines(document),
         *sharing_lines(document),
         *localisation_lines(document),
@@ -349,6 +350,23 @@ def verification_lines(document: dict) -> list[str]:
         share = f"{100.0 * verified / claimed:.0f} %" if claimed else "n/a"
         rows.append(f"| {name} | {claimed} | {verified} | {share} |")
     return ["## Done and seen", "", *rows, ""]
+
+
+def video_lines(document: dict) -> list[str]:
+    """``report.md``'s line on the mission's video: where it is, or that it was cut short (a mission
+    interrupted leaves ``mission.part.mp4`` finished and playable; one killed with ``kill -9`` leaves it
+    unfinished, and it may not play)."""
+    video = document.get("video")
+    if not video:
+        return []
+    if video.get("partial"):
+        return [
+            f"Video: `{video['file']}`, cut short: the mission ended before it finished the video (it plays "
+            "after Ctrl-C or SIGTERM; after `kill -9` it may not).",
+            "",
+        ]
+    frames = f", {video['frames']} frames" if "frames" in video else ""
+    return [f"Video: [{video['file']}]({video['file']}){frames}.", ""]
 
 
 def sharing_lines(document: dict) -> list[str]:
@@ -522,6 +540,11 @@ def rebuild(root, tank) -> dict:
         "tasks": sorted(tasks.values(), key=lambda t: t["id"]),
         "done_by_robot": done_by_robot,
     }
+    document.pop("video", None)
+    if (root / "mission.mp4").is_file():
+        document["video"] = {"file": "mission.mp4", **snapshot.get("video", {}), "partial": False}
+    elif (root / "mission.part.mp4").is_file():  # the mission never finished its video
+        document["video"] = {"file": "mission.part.mp4", "partial": True}
     views_array = np.array(views).reshape(-1, 6)
     document["coverage"], occluded = coverage_of(views_array, tank)
     document["localisation"] = localisation_errors(root, list(document["robots"]))

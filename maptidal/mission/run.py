@@ -602,7 +602,10 @@ class Mission:
         try:
             return self._run(progress)
         finally:
-            # whatever ended the mission: the worker process goes, and the renderer, on its own thread
+            # whatever ended the mission: the worker process goes, the video is left playable, and the
+            # renderer goes, on its own thread
+            if self.video is not None:
+                self.video.abandon()
             self.perception.close()
             self._gl.submit(self.sim.close).result()
             self._gl.shutdown()

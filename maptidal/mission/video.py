@@ -36,6 +36,7 @@ class MissionVideo:
             self.renderer.close()
             raise RuntimeError("this OpenCV build cannot write MP4 (mp4v) video")
         self.frames = 0
+        self.closed = False
 
     def frame_due(self, now: float) -> None:
         """Write a frame if one is due at ``now``."""
@@ -66,3 +67,14 @@ class MissionVideo:
         self.writer.release()
         self.renderer.close()
         self.partial.replace(self.path)
+        self.closed = True
+
+    def abandon(self) -> None:
+        """For a mission that ended early (interrupted, or failed): finish the file so that it plays, but
+        keep its partial name, and free the renderer now (left to the garbage collector, it would be
+        freed after EGL has shut down, with a traceback)."""
+        if self.closed:
+            return
+        self.writer.release()
+        self.renderer.close()
+        self.closed = True

@@ -538,6 +538,10 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             )
         ],
     ),
+    "I5": (
+        "an interrupted mission leaves its video to the garbage collector",
+        [("maptidal/mission/run.py", "                self.video.abandon()", "                pass")],
+    ),
 }
 
 
