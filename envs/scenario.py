@@ -125,8 +125,15 @@ def scenario_from_dict(document: dict, base: Path | None = None) -> Scenario:
         f"physics.timestep_s must be in [0.0001, 0.02] s, got {timestep!r}",
     )
     _require(
-        isinstance(period, int | float) and period >= timestep,
-        f"physics.control_period_s must be >= timestep_s, got {period!r}",
+        isinstance(period, int | float) and timestep <= period <= 1.0,
+        f"physics.control_period_s must be in [timestep_s, 1] s, got {period!r}",
+    )
+    # the flight mode runs once a control period of whole physics steps: a period of 2.5 steps would run
+    # every 2 or 3 steps (the simulator rounds) and no longer be the period asked for
+    steps = period / timestep
+    _require(
+        abs(steps - round(steps)) <= 1e-6 * steps,
+        f"physics.control_period_s ({period!r} s) must be a whole number of timesteps ({timestep!r} s)",
     )
     water_table = dict(document.get("water", {}))
     _check_keys(water_table, {"current"} | {f.name for f in fields(WaterParams)}, "[water]")
@@ -198,7 +205,10 @@ def _robot_from(entry: dict, index: int, tank: TankModel) -> RobotSpec:
         f"(or within {HULL_MARGIN_M} m of a wall, the floor or the surface)",
     )
     yaw = entry.get("yaw_deg", 0.0)
-    _require(isinstance(yaw, int | float) and math.isfinite(yaw), f"{where}.yaw_deg must be a finite number")
+    _require(
+        isinstance(yaw, int | float) and math.isfinite(yaw) and abs(yaw) <= 360.0,
+        f"{where}.yaw_deg must be a number of degrees in [-360, 360], got {yaw!r}",
+    )
     sensors = entry.get("sensors", list(SENSORS))
     _require(isinstance(sensors, list), f"{where}.sensors must be a list")
     for sensor in sensors:

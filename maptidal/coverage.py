@@ -71,12 +71,16 @@ class CoverageParams:
 
 # Voxelising costs about 600 bytes a voxel at its peak: a million voxels stay under a gigabyte.
 MAX_VOXELS = 1_000_000
+# Fewer voxels than this cannot tell the walls' parts apart (on the OSB tank's 11 m^2 it is a 33 cm
+# voxel, a sixth of the water's depth); nearly any set of views then scores as full coverage.
+MIN_VOXELS = 100
 
 
 def voxel_centres(surface: trimesh.Trimesh, voxel_m: float) -> np.ndarray:
     """Centres ``(V, 3)`` of the surface voxels of a mesh (trimesh subdivision voxeliser).
 
-    Raises ValueError, before any work, when the surface would need more than :data:`MAX_VOXELS`.
+    Raises ValueError, before any work, when the surface would need more than :data:`MAX_VOXELS`, or fewer
+    than :data:`MIN_VOXELS`.
     """
     estimate = float(surface.area) / voxel_m**2
     if estimate > MAX_VOXELS:
@@ -85,6 +89,13 @@ def voxel_centres(surface: trimesh.Trimesh, voxel_m: float) -> np.ndarray:
             f"a voxel of {voxel_m:g} m gives about {estimate:,.0f} voxels on this surface "
             f"({surface.area:.1f} m^2); at most {MAX_VOXELS:,} are allowed, so use a voxel of at least "
             f"{smallest * 1000:.1f} mm"
+        )
+    if estimate < MIN_VOXELS:
+        largest = math.sqrt(float(surface.area) / MIN_VOXELS)
+        raise ValueError(
+            f"a voxel of {voxel_m:g} m gives about {estimate:,.0f} voxels on this surface "
+            f"({surface.area:.1f} m^2); at least {MIN_VOXELS} are needed to tell its parts apart, so use a "
+            f"voxel of at most {largest * 1000:.0f} mm"
         )
     longest = float(surface.edges_unique_length.max()) if len(surface.faces) else 0.0
     # Each subdivision halves the edges; the voxeliser stops when edges < pitch / 2.

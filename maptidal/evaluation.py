@@ -420,8 +420,12 @@ _WORKER_STATE: dict = {}
 def parse_grid(tokens: list[str]) -> dict[str, tuple[float, ...]]:
     """Parse ``["t=0.7,0.75", "r_ex=1.5,1.7"]`` into a grid; missing names keep their defaults."""
     grid = dict(DEFAULT_GRID)
+    given: set[str] = set()
     for token in tokens:
         name, sep, values = token.partition("=")
+        if sep and name in GRID_TO_PARAM and name in given:
+            raise ValueError(f"grid entry {token!r}: {name} is given twice; put all its values in one entry")
+        given.add(name)
         if not sep or name not in GRID_TO_PARAM:
             raise ValueError(
                 f"bad grid entry {token!r}: use NAME=V1,V2,... with NAME one of {sorted(GRID_TO_PARAM)}"

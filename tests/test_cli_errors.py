@@ -32,6 +32,15 @@ def files(tmp_path_factory) -> dict[str, Path]:
     (root / "folder.png").mkdir()
     robot = '[[robots]]\nname = "{name}"\nframe = "heavy"\nposition = [-1.5, 0.0, 1.0]\n'
     (root / "same_place.toml").write_text(robot.format(name="rov0") + robot.format(name="rov1"))
+    mission = (Path(__file__).parents[1] / "assets" / "scenarios" / "mission.toml").read_text()
+    (root / "period.toml").write_text(mission.replace("control_period_s = 0.02", "control_period_s = 0.005"))
+    (root / "slow_period.toml").write_text(
+        mission.replace("control_period_s = 0.02", "control_period_s = 5.0")
+    )
+    (root / "yaw.toml").write_text(mission.replace("yaw_deg = 0.0", "yaw_deg = 1e308", 1))
+    before_mission = mission.split("[mission]")[0]
+    (root / "fast_commands.toml").write_text(before_mission + "[mission]\ncommand_rate_hz = 1e9\n")
+    (root / "fast_frames.toml").write_text(before_mission + "[mission]\nframe_rate_hz = 51\n")
     return {"root": root} | {p.stem: p for p in root.iterdir()}
 
 
@@ -65,6 +74,27 @@ CASES = [
     ("unknown axis", "sim --command warp=1 --duration 0.1", "unknown command axis"),
     ("sweep jobs 0", "sweep --jobs 0 --out {root}/sweep0", "must be at least 1"),
     ("endless mission", "run --duration 1e12 --out {root}/endless", "at most 86400 s"),
+    ("control period of 2.5 steps", "run --scenario {period} --out {root}/p", "whole number of timesteps"),
+    ("control period of 5 s", "run --scenario {slow_period} --out {root}/p", "must be in [timestep_s, 1] s"),
+    (
+        "yaw 1e308",
+        "run --scenario {yaw} --out {root}/y",
+        "yaw_deg must be a number of degrees in [-360, 360]",
+    ),
+    ("commands at 1e9 Hz", "run --scenario {fast_commands} --out {root}/c", "command_rate_hz = 1e+09 Hz"),
+    (
+        "frames at 51 Hz",
+        "run --scenario {fast_frames} --out {root}/f",
+        "faster than the control period allows",
+    ),
+    (
+        "capture at 1e6 Hz",
+        "capture --frame-rate 1e6 --out {root}/cap",
+        "faster than the control period allows",
+    ),
+    ("voxel of 100 m", "compare --voxel 100 --out {root}/cmp", "at least 100 are needed"),
+    ("voxel of 0.4 m", "coverage {tasks} --voxel 0.4", "at least 100 are needed"),
+    ("a grid name twice", "sweep --grid t=0.7 t=0.8 --out {root}/sw", "t is given twice"),
     ("unknown subcommand", "fly", "invalid choice"),
     ("missing mesh", "discover {root}/missing.ply", "not found"),
 ]

@@ -193,6 +193,11 @@ def _fly(sim: Simulation, out_dir: Path, params: CaptureParams, seed: int, robot
         ]
     )
     period = sim.scenario.control_period_s
+    if params.frame_rate_hz > (1 + 1e-9) / period:
+        raise ValueError(
+            f"a frame rate of {params.frame_rate_hz:g} Hz is faster than the control period allows "
+            f"({1 / period:g} Hz): frames are drawn once a control period"
+        )
     frame_every = 1.0 / params.frame_rate_hz
     elapsed, next_frame = 0.0, params.settle_s
     while elapsed < route.duration - 1e-9:

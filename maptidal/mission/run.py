@@ -241,6 +241,20 @@ class MissionParams:
             raise ValueError("a video needs a size of at least 16 x 16 and positive frame rates")
 
 
+def check_rates(params: MissionParams, control_period_s: float) -> None:
+    """Refuse frame and command rates faster than the scenario's control period: the loop runs once a
+    control period, so a faster rate would only repeat the same frame or command (and a frame rate of
+    1e9 would have the loop draw its cameras at every period, silently)."""
+    fastest = 1.0 / control_period_s
+    for name in ("frame_rate_hz", "frame_rate_no_dvl_hz", "command_rate_hz"):
+        value = getattr(params, name)
+        if value > fastest * (1 + 1e-9):
+            raise ValueError(
+                f"{name} = {value:g} Hz is faster than the control period allows ({fastest:g} Hz, one every "
+                f"{control_period_s:g} s)"
+            )
+
+
 @dataclass
 class _Robot:
     """One robot's mission state."""
@@ -340,6 +354,7 @@ class Mission:
     def __init__(self, scenario: Scenario | str | None, params: MissionParams, out_dir) -> None:
         self.params = params
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        check_rates(params, self.scenario.control_period_s)
         names = [r.name for r in self.scenario.robots]
         index_of = {name: k for k, name in enumerate(names)}
         joins = check_events(params.events, names)
