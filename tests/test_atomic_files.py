@@ -35,3 +35,23 @@ def test_a_figure_is_saved_atomically_as_a_png(tmp_path):
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["plot.png"]  # no temporary left behind
     assert not plt.fignum_exists(figure.number)  # and the figure is closed
+
+
+def test_a_reused_mission_folder_is_cleared_of_the_earlier_missions_files_and_nothing_else(tmp_path):
+    from maptidal.mission.outputs import MISSION_FILES, MissionWriter
+
+    out = tmp_path / "mission"
+    (out / "images").mkdir(parents=True)
+    for name in MISSION_FILES:
+        (out / name).write_text("from an earlier mission")
+    (out / "images" / "task_0999_rov1.png").write_bytes(b"stale")
+    (out / "notes.txt").write_text("the user's own")  # not ours: kept
+    (out / "images" / "sketch.jpg").write_bytes(b"not a task image")  # not ours either
+    writer = MissionWriter(out)
+    writer.event(0.0, "start", robots=["rov0"])
+    assert writer.cleared == len(MISSION_FILES) + 1
+    assert not (out / "images" / "task_0999_rov1.png").exists()
+    assert not (out / "mission.mp4").exists() and not (out / "report.md").exists()
+    assert (out / "notes.txt").read_text() == "the user's own"
+    assert (out / "images" / "sketch.jpg").exists()
+    assert MissionWriter(tmp_path / "new").cleared == 0

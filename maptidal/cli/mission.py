@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 from pathlib import Path
 
 from maptidal.cli.common import (
@@ -105,6 +106,12 @@ def run_mission(args: argparse.Namespace) -> int:
     if args.video:
         params = dataclasses.replace(params, video=True)
     mission = Mission(scenario, params, args.out)
+    if mission.writer.cleared:
+        print(
+            f"maptidal run: note: {args.out} held an earlier mission; its {mission.writer.cleared} files "
+            "were removed",
+            file=sys.stderr,
+        )
     bar = ProgressBar(100, "mission")
     state = {"shown": 0}
 

@@ -25,6 +25,32 @@ from maptidal.files import atomic_write_bytes, atomic_write_json, atomic_write_t
 
 EVENTS = "events.jsonl"
 TRAJECTORIES = "trajectories.csv"
+# every file a mission writes at the top of its folder (its task images go in images/)
+MISSION_FILES = (
+    EVENTS,
+    TRAJECTORIES,
+    "mission.json",
+    "report.md",
+    "top_view.png",
+    "timeline.png",
+    "localisation.png",
+    "histogram.png",
+    "voxel_views.png",
+    "mission.mp4",
+    "mission.part.mp4",
+)
+
+
+def clear_earlier_mission(root: Path) -> int:
+    """Remove what an earlier mission wrote in ``root`` (:data:`MISSION_FILES` and ``images/*.png``), so
+    that a reused folder holds no stale task image or video beside the new run's; any other file is left
+    alone. Returns how many files went."""
+    stale = [root / name for name in MISSION_FILES if (root / name).is_file()]
+    if (root / "images").is_dir():
+        stale += [path for path in (root / "images").glob("*.png") if path.is_file()]
+    for path in stale:
+        path.unlink()
+    return len(stale)
 
 
 class MissionWriter:
@@ -32,6 +58,7 @@ class MissionWriter:
 
     def __init__(self, out_dir) -> None:
         self.root = Path(out_dir)
+        self.cleared = clear_earlier_mission(self.root) if self.root.is_dir() else 0
         (self.root / "images").mkdir(parents=True, exist_ok=True)
         self._events = open(self.root / EVENTS, "w", encoding="utf-8")  # noqa: SIM115 (open for the mission)
         self._trajectories = open(self.root / TRAJECTORIES, "w", encoding="utf-8")  # noqa: SIM115
