@@ -436,3 +436,45 @@ def test_the_team_can_pick_tasks_that_go_to_pose_flies():
         check_env(quick.unwrapped)
     finally:
         quick.close()
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"image_size": (100000, 128)}, "at most"),  # a raw MemoryError before
+        ({"image_size": (80.5, 128)}, "two whole numbers"),
+        ({"image_size": (True, 128)}, "two whole numbers"),
+        ({"image_size": 80}, "two whole numbers"),
+        ({"flat_obs": "yes"}, "flat_obs must be True or False"),
+        ({"episode_s": math.inf}, "episode_s must be"),  # an OverflowError before
+        ({"episode_s": 1e9}, "a day"),
+        ({"episode_s": math.nan}, "episode_s must be"),
+    ],
+)
+def test_bad_options_are_refused_before_anything_is_built(options, message):
+    from envs.gym.core import EnvOptions
+
+    with pytest.raises(ValueError, match=message):
+        EnvOptions.checked(options)
+
+
+def test_a_step_before_reset_or_after_the_episode_ended_raises():
+    from envs.gym.station_keeping import StationKeepingEnv
+
+    env = StationKeepingEnv()  # unwrapped: Gymnasium's OrderEnforcing is not there to catch it
+    try:
+        with pytest.raises(gymnasium.error.ResetNeeded, match="before step"):
+            env.step(np.zeros(6, np.float32))
+        env.reset(seed=0)
+        up = np.array([0, 0, 1, 0, 0, 0], np.float32)  # full heave: the robot surfaces and the episode ends
+        for _ in range(env.max_steps):
+            _, _, terminated, truncated, _ = env.step(up)
+            if terminated or truncated:
+                break
+        assert terminated
+        with pytest.raises(gymnasium.error.ResetNeeded, match="terminated"):
+            env.step(up)
+        env.reset(seed=1)
+        env.step(np.zeros(6, np.float32))  # a new episode steps again
+    finally:
+        env.close()

@@ -336,6 +336,19 @@ def test_bad_input_gets_a_clear_error(tmp_path, capsys):
     assert main(["mavlink", "--connect", "udpout:127.0.0.1:9", "--waypoints", str(bad)]) == 2
     assert "waypoint 0 has a value that is not a number" in capsys.readouterr().err
     assert main(["mavlink", "--connect", "udpout:127.0.0.1:9", "--mode", "warp"]) == 2
+    assert main(["mavlink", "--connect", "garbage://x", "--depth", "1"]) == 2
+    assert "is not a MAVLink address" in capsys.readouterr().err
+    assert main(["mavlink", "--connect", "udpout:127.0.0.1:9"]) == 2  # depth-hold, but no depth given
+    assert "needs --depth" in capsys.readouterr().err
+    assert main(["mavlink", "--connect", "udpout:127.0.0.1:9", "--depth", "50", "--max-depth", "2"]) == 2
+    assert "deeper than --max-depth 2 m" in capsys.readouterr().err
+    deep = tmp_path / "deep.json"
+    deep.write_text('[{"north_m": 1, "east_m": 0, "depth_m": 3}]')
+    assert (
+        main(["mavlink", "--connect", "udpout:127.0.0.1:9", "--waypoints", str(deep), "--max-depth", "2"])
+        == 2
+    )
+    assert "a waypoint at 3 m is deeper" in capsys.readouterr().err
     with pytest.raises(ValueError, match="unknown mode"):
         MavlinkBridge("udpout:127.0.0.1:9").set_mode("acro")
     with pytest.raises(CommandError):
@@ -555,6 +568,8 @@ def test_sigterm_makes_maptidal_mavlink_send_neutral_and_disarm():
             "mavlink",
             "--connect",
             served.url,
+            "--depth",
+            "1.0",
             "--duration",
             "60",
         ]

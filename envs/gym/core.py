@@ -26,6 +26,8 @@ from envs.views import third_person_frame
 
 ACTIONS = ("pilot", "thrusters")
 IMAGES = (None, "left", "stereo")
+MAX_IMAGE = (800, 1280)  # height, width: the tank model's offscreen buffer (envs.world.build_tank_spec)
+MAX_EPISODE_S = 86400.0  # a day, as for a mission (maptidal run)
 # where a robot may be put or sent in the OSB tank (tank frame: end wall at x = 0, floor at z = 0):
 # 0.8 m clear of the end wall, 0.8 m of the 2.4 m wall's centre line, 0.5 m above the floor and below
 # the 2.0 m surface
@@ -49,17 +51,24 @@ class EnvOptions:
             raise ValueError(f"action must be one of {ACTIONS}, got {self.action!r}")
         if self.obs_images not in IMAGES:
             raise ValueError(f"obs_images must be one of {IMAGES}, got {self.obs_images!r}")
-        height, width = self.image_size
-        if not (int(height) > 0 and int(width) > 0):
+        if not isinstance(self.flat_obs, bool):
+            raise ValueError(f"flat_obs must be True or False, got {self.flat_obs!r}")
+        size = tuple(self.image_size) if isinstance(self.image_size, tuple | list) else ()
+        whole = all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in size)
+        if not (len(size) == 2 and whole and 0 < size[0] <= MAX_IMAGE[0] and 0 < size[1] <= MAX_IMAGE[1]):
             raise ValueError(
-                f"image_size must be two positive integers (height, width), got {self.image_size}"
+                f"image_size must be two whole numbers (height, width) of at most {MAX_IMAGE} pixels (the "
+                f"model's offscreen buffer), got {self.image_size!r}"
             )
         if self.flat_obs and self.obs_images is not None:
             raise ValueError("flat_obs cannot carry images: use the Dict observation with obs_images")
         if not (0 < self.control_period_s <= 1.0):
             raise ValueError(f"control_period_s must be in (0, 1] s, got {self.control_period_s}")
-        if not (self.episode_s >= self.control_period_s):
-            raise ValueError(f"episode_s must be at least one control period, got {self.episode_s}")
+        if not (self.control_period_s <= self.episode_s <= MAX_EPISODE_S):
+            raise ValueError(
+                f"episode_s must be from one control period to {MAX_EPISODE_S:g} s (a day), "
+                f"got {self.episode_s}"
+            )
         if self.frame not in ("heavy", "standard"):
             raise ValueError(f"frame must be 'heavy' or 'standard', got {self.frame!r}")
 
@@ -75,6 +84,34 @@ class EnvOptions:
 
 
 _ZERO3 = np.zeros(3)
+
+
+class EpisodeState:
+    """Where an environment's episode stands, so that a step before ``reset()`` or after the episode
+    ended raises ``gymnasium.error.ResetNeeded`` (Gymnasium leaves both undefined; a step there used to
+    go on, with ``terminated=False`` after a termination)."""
+
+    def __init__(self) -> None:
+        self.ended: str | None = "never started"
+
+    def started(self) -> None:
+        """A new episode began (``reset``)."""
+        self.ended = None
+
+    def check_step(self) -> None:
+        """Raise unless an episode is under way."""
+        if self.ended == "never started":
+            raise gymnasium.error.ResetNeeded("call reset() before step()")
+        if self.ended is not None:
+            raise gymnasium.error.ResetNeeded(
+                f"the episode has ended ({self.ended}); call reset() before step()"
+            )
+
+    def record(self, result: tuple) -> tuple:
+        """Note a step's ``(obs, reward, terminated, truncated, info)``; returns it unchanged."""
+        terminated, truncated = result[2], result[3]
+        self.ended = "terminated" if terminated else "truncated" if truncated else None
+        return result
 
 
 def _has_display() -> bool:
@@ -130,6 +167,7 @@ class MapTidalEnv(gymnasium.Env):
             self.observation_space = self._dict_space
         self.sim.track_estimate(self.robot)  # the observation's estimate, in MANUAL too
         self._steps = 0
+        self.episode = EpisodeState()
         self._renderer: mujoco.Renderer | None = None
         self._viewer = None
 
@@ -156,6 +194,7 @@ class MapTidalEnv(gymnasium.Env):
         self.sim.reset(seed=int(self.np_random.integers(2**31 - 1)))
         self._steps = 0
         self._start_episode()  # placing the robot restarts the simulation's estimator there
+        self.episode.started()
         return self._observation(), {}
 
     @property
@@ -167,12 +206,16 @@ class MapTidalEnv(gymnasium.Env):
         return self.sim.latest_readings(self.robot)
 
     def step(self, action):
-        """Hold ``action`` for one control period (``control_period_s``)."""
+        """Hold ``action`` for one control period (``control_period_s``). Raises
+        ``gymnasium.error.ResetNeeded`` before ``reset()`` and after the episode ended."""
+        self.episode.check_step()
         self._act(action)
         truth = self.sim.ground_truth(self.robot)
         reward, terminated, info = self._reward(truth)
         truncated = not terminated and self._steps >= self.max_steps
-        return self._observation(), float(reward), bool(terminated), bool(truncated), info
+        return self.episode.record(
+            (self._observation(), float(reward), bool(terminated), bool(truncated), info)
+        )
 
     def _act(self, action) -> None:
         """Check ``action`` and fly it for one control period (the physics, the sensors, the estimate)."""

@@ -13,7 +13,7 @@ from gymnasium import spaces
 
 from controllers.pose import PoseController
 from controllers.task import TaskExecutor, TaskParams
-from envs.gym.core import SAFE_BOX, EnvOptions
+from envs.gym.core import SAFE_BOX, EnvOptions, EpisodeState
 from envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
 from envs.scenario import Scenario, load_scenario, with_frame
 from envs.simulation import Simulation
@@ -105,6 +105,7 @@ class TeamInspectionEnv(gymnasium.Env):
         )
         if self.options.obs_images is not None:
             raise ValueError("the team environment has no image observations yet")
+        self.episode = EpisodeState()
         base = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         base = with_frame(base, self.options.frame)
         template = base.robots[0]
@@ -178,11 +179,17 @@ class TeamInspectionEnv(gymnasium.Env):
         for controller in self._controllers.values():
             controller.reset()  # no integral carried over from the last episode
         self._look()
+        self.episode.started()
         return self._observation(), {}
 
     def step(self, action):
         """Hold each robot's action for one control period (with ``action="tasks"``: fly each robot to
-        its chosen task and hold it for the dwell); one shared reward."""
+        its chosen task and hold it for the dwell); one shared reward. Raises
+        ``gymnasium.error.ResetNeeded`` before ``reset()`` and after the episode ended."""
+        self.episode.check_step()
+        return self.episode.record(self._step(action))
+
+    def _step(self, action):
         if not isinstance(action, dict) or set(action) != set(self.agents):
             raise ValueError(f"action must be a dict with one entry per robot {self.agents}")
         if self.tasks_mode:

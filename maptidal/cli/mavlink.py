@@ -18,6 +18,30 @@ from maptidal.cli.common import RunError, finite_float, positive_float
 MAX_WAYPOINTS = 1000
 CONTROL_PERIOD_S = 0.05  # 20 Hz, the bridge's streaming rate
 MODES = ("depth-hold", "stabilize", "manual", "alt_hold", "poshold")
+# the deepest target the bridge takes by default: the BlueROV2's rated depth, 100 m (Blue Robotics'
+# BlueROV2 specifications); --max-depth sets the water at hand (a 2 m tank: --max-depth 2)
+RATED_DEPTH_M = 100.0
+LINK_SCHEMES = ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin")
+
+
+def connection_string(text: str) -> str:
+    """An argparse type: a pymavlink address, SCHEME:HOST:PORT with a scheme of :data:`LINK_SCHEMES`
+    and a port from 1 to 65535, or a serial device path (``/dev/ttyACM0`` or ``/dev/ttyACM0,115200``)."""
+    if text.startswith("/") or text.upper().startswith("COM"):
+        _device, _, baud = text.partition(",")
+        if baud and not (baud.isdigit() and int(baud) > 0):
+            raise argparse.ArgumentTypeError(
+                f"{text!r}: the baud rate after the comma must be a whole number"
+            )
+        return text
+    scheme, _, rest = text.partition(":")
+    host, _, port = rest.rpartition(":")
+    if scheme not in LINK_SCHEMES or not host or not (port.isdigit() and 1 <= int(port) <= 65535):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a MAVLink address: use {'|'.join(LINK_SCHEMES)}:HOST:PORT (port 1 to 65535) or "
+            "a serial device such as /dev/ttyACM0,115200"
+        )
+    return text
 
 
 def register(commands) -> None:
@@ -35,6 +59,7 @@ def register(commands) -> None:
     mavlink.add_argument(
         "--connect",
         required=True,
+        type=connection_string,
         metavar="URL",
         help="pymavlink address: udpin:0.0.0.0:14550, "
         "udpout:HOST:PORT, tcp:HOST:PORT or a serial device (/dev/ttyACM0,115200)",
@@ -42,7 +67,17 @@ def register(commands) -> None:
     mavlink.add_argument(
         "--mode", choices=MODES, default="depth-hold", help="what to fly (default %(default)s)"
     )
-    mavlink.add_argument("--depth", type=positive_float, default=1.0, metavar="M", help="depth to hold (m)")
+    mavlink.add_argument(
+        "--depth", type=positive_float, metavar="M", help="depth to hold (m); required with --mode depth-hold"
+    )
+    mavlink.add_argument(
+        "--max-depth",
+        type=positive_float,
+        default=RATED_DEPTH_M,
+        metavar="M",
+        help="refuse targets deeper than this: the water at hand (default %(default)g m, the BlueROV2's "
+        "rated depth)",
+    )
     mavlink.add_argument(
         "--heading", type=float, metavar="DEG", help="heading to hold (deg; default: as found)"
     )
@@ -148,6 +183,18 @@ def run_mavlink(args: argparse.Namespace) -> int:
     )
 
     waypoints = load_waypoints(args.waypoints) if args.waypoints and args.action == "fly" else None
+    if args.action == "fly" and waypoints is None and args.mode == "depth-hold":
+        if args.depth is None:
+            raise ValueError(
+                "--mode depth-hold needs --depth M: the bridge dives to no depth it was not given"
+            )
+        if args.depth > args.max_depth:
+            raise ValueError(f"--depth {args.depth:g} m is deeper than --max-depth {args.max_depth:g} m")
+    deepest = max((w["depth_m"] for w in waypoints or []), default=0.0)
+    if deepest > args.max_depth:
+        raise ValueError(
+            f"{args.waypoints}: a waypoint at {deepest:g} m is deeper than --max-depth {args.max_depth:g} m"
+        )
     key = load_signing_key(args.signing_key_file)
     bridge = MavlinkBridge(args.connect, BridgeParams(connect_timeout_s=args.timeout), signing_key=key)
     try:
