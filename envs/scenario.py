@@ -69,6 +69,26 @@ def _check_keys(table: dict, allowed: set[str], where: str) -> None:
     check_keys(table, allowed, where, ScenarioError)
 
 
+# The strongest water current a scenario, an event or Simulation.set_current takes: over three times the
+# BlueROV2's 1.5 m/s top speed (Blue Robotics' specifications), enough for any stress test of holding
+# station; far beyond it the quadratic drag makes the physics step stiff and it diverges.
+MAX_CURRENT_M_S = 5.0
+
+
+def check_current(current, where: str = "the current") -> np.ndarray:
+    """``current`` (m/s, world frame) as an array, or a ValueError: three finite numbers, at most
+    :data:`MAX_CURRENT_M_S` in magnitude."""
+    vector = np.asarray(current, float)
+    if vector.shape != (3,) or not np.all(np.isfinite(vector)):
+        raise ValueError(f"{where} is three finite numbers (m/s), got {current!r}")
+    if float(np.linalg.norm(vector)) > MAX_CURRENT_M_S:
+        raise ValueError(
+            f"{where} of {float(np.linalg.norm(vector)):g} m/s is beyond {MAX_CURRENT_M_S:g} m/s (over three "
+            "times the BlueROV2's top speed)"
+        )
+    return vector
+
+
 def _vector(value, where: str, size: int = 3) -> tuple[float, ...]:
     return finite_vector(value, where, size, ScenarioError)
 
@@ -138,6 +158,10 @@ def scenario_from_dict(document: dict, base: Path | None = None) -> Scenario:
     water_table = dict(document.get("water", {}))
     _check_keys(water_table, {"current"} | {f.name for f in fields(WaterParams)}, "[water]")
     current = _vector(water_table.pop("current", [0.0, 0.0, 0.0]), "water.current")
+    try:
+        check_current(current, "water.current")
+    except ValueError as err:
+        raise ScenarioError(str(err)) from None
     try:
         water = WaterParams(**water_table)
     except (TypeError, ValueError) as err:

@@ -55,7 +55,7 @@ from envs.rendering import (
     renders_on_gpu,
     update_camera_scene,
 )
-from envs.scenario import Scenario, load_scenario
+from envs.scenario import Scenario, check_current, load_scenario
 from envs.sensors import RobotSensors
 from envs.water import WaterModel, depth_to_range, worker_thread
 from envs.world import DEPTH_SENSOR_POSITION, RobotPlacement, camera_offsets, compose
@@ -265,9 +265,7 @@ class Simulation:
     def set_current(self, current_world) -> None:
         """Change the water current (m/s, world frame) from now on; :meth:`reset` restores the
         scenario's."""
-        current = np.asarray(current_world, float)
-        if current.shape != (3,) or not np.all(np.isfinite(current)):
-            raise ValueError(f"a current is three finite numbers (m/s), got {current_world!r}")
+        current = check_current(current_world)
         for k in range(len(self.robots)):
             start = hydrodynamics.HEADER + k * hydrodynamics.BLOCK
             slot = start + hydrodynamics.SLOT_CURRENT
@@ -419,6 +417,7 @@ class Simulation:
 
         Raises :class:`SimulationError` if the state becomes NaN or diverges."""
         bad_before = self._instability_warnings()
+        time_before = self.time  # MuJoCo restarts a diverged state at t = 0: say when it went
         start = time.perf_counter()
         mujoco.mj_step(self.model, self.data, nstep=int(n_steps))
         self.wall_time_s += time.perf_counter() - start
@@ -427,7 +426,8 @@ class Simulation:
         diverged = self._instability_warnings() > bad_before
         if diverged or not (np.isfinite(self.data.qpos).all() and np.isfinite(self.data.qvel).all()):
             raise SimulationError(
-                f"the physics state became NaN or diverged at t = {self.time:.3f} s; "
+                f"the physics state became NaN or diverged in the {n_steps} steps after "
+                f"t = {time_before:.3f} s; "
                 f"last thruster commands {self.data.ctrl.round(3).tolist()}. Reset the simulation."
             )
         return self.time

@@ -41,6 +41,10 @@ def files(tmp_path_factory) -> dict[str, Path]:
     before_mission = mission.split("[mission]")[0]
     (root / "fast_commands.toml").write_text(before_mission + "[mission]\ncommand_rate_hz = 1e9\n")
     (root / "fast_frames.toml").write_text(before_mission + "[mission]\nframe_rate_hz = 51\n")
+    (root / "fast_current.toml").write_text(
+        before_mission
+        + '[mission]\n[[mission.events]]\ntime_s = 2\nkind = "current"\ncurrent = [1e6, 0, 0]\n'
+    )
     return {"root": root} | {p.stem: p for p in root.iterdir()}
 
 
@@ -95,6 +99,7 @@ CASES = [
     ("voxel of 100 m", "compare --voxel 100 --out {root}/cmp", "at least 100 are needed"),
     ("voxel of 0.4 m", "coverage {tasks} --voxel 0.4", "at least 100 are needed"),
     ("a grid name twice", "sweep --grid t=0.7 t=0.8 --out {root}/sw", "t is given twice"),
+    ("a current of 1e6 m/s", "run --scenario {fast_current} --out {root}/cur", "beyond 5 m/s"),
     ("unknown subcommand", "fly", "invalid choice"),
     ("missing mesh", "discover {root}/missing.ply", "not found"),
 ]
@@ -156,6 +161,21 @@ def test_a_closed_output_pipe_is_one_line_not_a_traceback(files):
     assert err.strip().splitlines() == [
         "maptidal discover: error: the output pipe was closed before all output was written"
     ]
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [("osmesa", "needs the OSMesa library"), ("vulkan", "is not a renderer MuJoCo knows")],
+)
+def test_a_gl_backend_that_cannot_work_is_one_line(value, message, monkeypatch, capsys):
+    import ctypes.util
+
+    real = ctypes.util.find_library
+    monkeypatch.setattr(ctypes.util, "find_library", lambda name: None if name == "OSMesa" else real(name))
+    monkeypatch.setenv("MUJOCO_GL", value)
+    assert main(["sim", "--duration", "0.1"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0] and "MUJOCO_GL=egl, the default" in lines[0]
 
 
 def test_ctrl_c_during_sim_exits_130_with_one_line():

@@ -173,6 +173,21 @@ def test_nan_state_raises_a_clear_error():
         sim.step({"rov": {}})
 
 
+def test_a_divergence_is_dated_when_it_happened_not_after_mujocos_restart():
+    sim = open_water("heavy")
+    run(sim, {}, 2.0)
+    sim.data.qvel[0] = np.nan  # MuJoCo restarts a bad state at t = 0 and warns
+    with pytest.raises(SimulationError, match=r"after t = 2\.000 s"):
+        sim.step({"rov": {}})
+
+
+def test_a_current_beyond_five_metres_a_second_is_refused():
+    sim = open_water("heavy")
+    sim.set_current([3.0, 3.0, 0.0])  # 4.2 m/s: a stress test, allowed
+    with pytest.raises(ValueError, match="beyond 5 m/s"):
+        sim.set_current([1e6, 0.0, 0.0])
+
+
 def test_collision_with_the_wall_is_reported():
     sim = Simulation()
     sim.reset(seed=0)

@@ -13,7 +13,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 from maptidal import progress
 from maptidal.cli import allocation, discovery, evaluation, mavlink, mission, perception, world
-from maptidal.cli.common import EXIT_BAD_INPUT, Parser, RunError, UsageError
+from maptidal.cli.common import EXIT_BAD_INPUT, Parser, RunError, UsageError, check_gl_backend
 from maptidal.cli.interrupts import EXIT_INTERRUPTED, EXIT_TERMINATED, Interrupts
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "build_parser", "main"]
@@ -85,6 +85,7 @@ def main(argv: Sequence[str] | None = None, interrupts: Interrupts | None = None
         return _interrupted(interrupts, "maptidal", None)
     prefix = f"maptidal {args.subcommand}"
     try:
+        check_gl_backend()
         status = args.handler(args)
         sys.stdout.flush()
         if interrupts.received is not None:  # a library swallowed the KeyboardInterrupt: say so all the same

@@ -4,6 +4,7 @@ output-path checks made before any work, and the discovery and coverage option g
 from __future__ import annotations
 
 import argparse
+import ctypes.util
 import math
 import os
 from pathlib import Path
@@ -15,6 +16,30 @@ EXIT_BAD_INPUT = 2
 
 class RunError(Exception):
     """A run that could not go on (the physics diverged, a renderer is missing): one line, exit 2."""
+
+
+# MUJOCO_GL's values on Linux (mujoco.rendering.classic.gl_context) and the system library each one opens
+# (the glfw package brings its own)
+GL_LIBRARIES: dict[str, str | None] = {"egl": "EGL", "osmesa": "OSMesa", "glx": "GL", "glfw": None}
+GL_OFF = ("disable", "disabled", "off", "false", "0")
+
+
+def check_gl_backend() -> None:
+    """Refuse, in one line, a MUJOCO_GL that MuJoCo does not know or whose library is not installed: MuJoCo
+    would fail at the first import of its renderer with an AttributeError from deep in PyOpenGL."""
+    value = os.environ.get("MUJOCO_GL", "").lower().strip()
+    if value in GL_OFF or value in ("", "enable", "enabled", "on", "true", "1"):
+        return
+    advice = "MUJOCO_GL=egl, the default, renders on a CPU through Mesa and on NVIDIA GPUs"
+    if value not in GL_LIBRARIES:
+        raise ValueError(
+            f"MUJOCO_GL={value} is not a renderer MuJoCo knows ({', '.join(GL_LIBRARIES)}); {advice}"
+        )
+    library = GL_LIBRARIES[value]
+    if library is not None and ctypes.util.find_library(library) is None:
+        raise ValueError(
+            f"MUJOCO_GL={value} needs the {library} library, which is not installed here; {advice}"
+        )
 
 
 class UsageError(Exception):

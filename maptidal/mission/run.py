@@ -49,7 +49,7 @@ from controllers.flight_modes import lean_stick
 from controllers.pose import PoseController
 from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, Route
 from envs.rendering import check_render_samples, describe_renderer
-from envs.scenario import Scenario, inside_tank, load_scenario
+from envs.scenario import Scenario, check_current, inside_tank, load_scenario
 from envs.simulation import Simulation, check_water_backend
 from envs.world import camera_offsets
 from maptidal.allocation.agent import AgentParams
@@ -334,6 +334,8 @@ def check_events(events: tuple[MissionEvent, ...], names: list[str]) -> dict[str
     """Check scripted events against the scenario's robots (ValueError naming the problem); returns the
     join time of each robot that joins later."""
     for event in events:
+        if event.kind == "current":
+            check_current(event.current, f"the current event at {event.time_s:g} s")
         for name in (event.robot, *event.robots) if event.kind != "current" else ():
             if name and name not in names:
                 raise ValueError(f"a {event.kind} event names {name!r}; the robots are {', '.join(names)}")
