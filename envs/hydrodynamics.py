@@ -283,11 +283,19 @@ _native: ctypes.CDLL | None = None
 _installed: str | None = None
 
 
-def _build_dirs() -> list[Path]:
-    dirs = [Path(__file__).resolve().parent / "_build"]
+def build_dirs(package_dir: Path | None = None) -> list[Path]:
+    """Where the native library is looked for and built, first to last: ``$MAPTIDAL_CACHE``; the source
+    checkout's ``envs/_build`` (``make setup`` builds it there), but never an installed package's folder
+    (``pip uninstall`` would leave the library behind); the user's cache, ``$XDG_CACHE_HOME/maptidal``
+    or ``~/.cache/maptidal``."""
+    package_dir = package_dir or Path(__file__).resolve().parent
+    dirs = []
     if os.environ.get("MAPTIDAL_CACHE"):
-        dirs.insert(0, Path(os.environ["MAPTIDAL_CACHE"]))
-    dirs.append(Path.home() / ".cache" / "maptidal")
+        dirs.append(Path(os.environ["MAPTIDAL_CACHE"]))
+    if not {"site-packages", "dist-packages"} & set(package_dir.parts):
+        dirs.append(package_dir / "_build")
+    cache_home = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    dirs.append(Path(cache_home) / "maptidal")
     return dirs
 
 
@@ -302,7 +310,7 @@ def build_native(force: bool = False) -> Path | None:
     tag = hashlib.sha1(source + mujoco.__version__.encode()).hexdigest()[:12]
     suffix = sysconfig.get_config_var("SHLIB_SUFFIX") or ".so"
     compiler = os.environ.get("CC", "cc")
-    for directory in _build_dirs():
+    for directory in build_dirs():
         target = directory / f"hydro-{tag}{suffix}"
         if target.exists() and not force:
             return target

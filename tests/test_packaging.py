@@ -96,3 +96,18 @@ def test_wheel_installed_in_a_fresh_venv_runs_compare_and_sim(tmp_path):
     assert set(compare["methods"]) == {"maptidal", "voronoi", "voronoi_generator", "boustrophedon"}
     sim = maptidal("sim", "--duration", "0.2", "--json")
     assert set(sim["robots"]) == {"rov0"}
+
+
+def test_the_native_library_is_never_built_inside_an_installed_package(monkeypatch, tmp_path):
+    from pathlib import Path
+
+    from envs.hydrodynamics import build_dirs
+
+    monkeypatch.delenv("MAPTIDAL_CACHE", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    installed = Path("/usr/lib/python3/site-packages/envs")
+    assert build_dirs(installed) == [tmp_path / "cache" / "maptidal"]  # pip uninstall leaves nothing there
+    checkout = tmp_path / "maptidal" / "envs"
+    assert build_dirs(checkout) == [checkout / "_build", tmp_path / "cache" / "maptidal"]
+    monkeypatch.setenv("MAPTIDAL_CACHE", str(tmp_path / "mine"))
+    assert build_dirs(installed)[0] == tmp_path / "mine"
