@@ -128,6 +128,7 @@ def _run_in_processes(function, items, jobs, initializer, initargs) -> Iterator[
                 yield futures[future], future.result()
     except BaseException:
         # interrupted, or the caller stopped early: end the runs under way rather than wait for them
+        # (ProcessPoolExecutor has no public way to; its _processes maps pids to the workers)
         for process in list((pool._processes or {}).values()):
             process.terminate()
         raise
