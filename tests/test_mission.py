@@ -440,7 +440,9 @@ def test_after_a_failure_the_survivor_finishes_every_task_and_the_mission_ends(t
     mission can finish. rov1 fails at 27 s while flying to a task; once the 40 s failure timeout has
     passed the survivor takes that task and does it, every task is done or given up with its reason
     (declined, or timed out), and the mission ends before its time limit. (Both robots carry a DVL, so
-    that the survivor can fly what it takes.)"""
+    that the survivor can fly what it takes.) The limit, 450 s, only needs to leave room: since the tank
+    was closed (session 16) the survivor also finds views of the far end wall, and ended at 376 s when
+    measured, where it ended before 300 s in the open tank."""
     import dataclasses
 
     from maptidal.discovery import DiscoveryParams
@@ -452,13 +454,13 @@ def test_after_a_failure_the_survivor_finishes_every_task_and_the_mission_ends(t
     )
     scenario = dataclasses.replace(scenario, robots=with_dvl)
     params = MissionParams(
-        duration_s=300.0,
+        duration_s=450.0,
         seed=1,
         discovery=DiscoveryParams(r_ex=3.0, theta_ex=1.2),
         events=(MissionEvent(FAIL_AT, "fail", "rov1"),),
     )
     document = Mission(scenario, params, tmp_path).run()
-    assert document["finished"] and document["sim_time_s"] < 300.0
+    assert document["finished"] and document["sim_time_s"] < 450.0
     events = read_events(tmp_path)
     # every task is done, or given up by the survivor with its reason in the log: declined (a view it
     # cannot pitch to) or timed out (since session 15, two views a hull's width from the ladder's rails)
