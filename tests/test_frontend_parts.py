@@ -116,6 +116,17 @@ def test_bad_recordings_give_one_line_and_status_2(tmp_path, how, message):
     assert_one_line_error(run_maptidal("discover-frames", root, "--out", tmp_path / "out", "--json"), message)
 
 
+def test_a_recording_without_ground_truth_is_told_to_use_its_own_poses(tmp_path):
+    # a real vehicle's recording: the robot's estimate only, no truth
+    root = tmp_path / "real"
+    writer = RecordingWriter(root, INTRINSICS, {"path": "field"})
+    for k in range(3):
+        image = _texture(k)
+        writer.add(0.2 * k, image, np.roll(image, -4, axis=1), {"estimate": _pose(0.1 * k)})
+    done = run_maptidal("discover-frames", root, "--out", tmp_path / "out", "--json")
+    assert_one_line_error(done, "use --pose dr or --pose vo")
+
+
 def test_a_missing_folder_and_bad_intrinsics_are_refused(tmp_path):
     with pytest.raises(RecordingError, match="no such recording"):
         load_recording(tmp_path / "nowhere")

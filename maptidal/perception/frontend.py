@@ -259,9 +259,12 @@ def run_frontend(
     available = recording.pose_sources()
     wanted = "truth" if pose_source == "truth" else ("dr" if "dr" in available else "estimate")
     if wanted not in available:
+        hint = ""
+        if pose_source == "truth" and available & {"dr", "estimate"}:
+            hint = " (a real vehicle's recording has no ground truth: use --pose dr or --pose vo)"
         raise RecordingError(
             f"{recording.root}: --pose {pose_source} needs {wanted!r} poses in every frame; "
-            f"it has {sorted(available)}"
+            f"it has {sorted(available)}{hint}"
         )
     params = params or FrontEndParams()
     sensors = recording.metadata.get("sensors")
