@@ -4,6 +4,9 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.setup-stamp
 RUN_DIR ?= runs/mission
+# the tests run in this many processes (pytest-xdist): the machines have 2 cores, and the suite's heavy
+# missions wait on each other's drawing; TEST_WORKERS=0 runs them in this one process
+TEST_WORKERS ?= 2
 
 # Headless rendering through EGL works on CPU-only machines (Mesa) and on NVIDIA GPUs.
 export MUJOCO_GL ?= egl
@@ -23,14 +26,14 @@ $(STAMP): pyproject.toml requirements.lock envs/_hydro.c
 	$(BIN)/python -m pip install -q --no-deps -r requirements.lock
 	$(BIN)/python -m pip install -q --no-deps -e .
 	# compile the C hydrodynamics callback (falls back to numpy when there is no compiler)
-	$(BIN)/python -c "from envs.hydrodynamics import build_native; print('hydrodynamics library:', build_native())"
+	$(BIN)/python -c "from maptidal.envs.hydrodynamics import build_native; print('hydrodynamics library:', build_native())"
 	touch $(STAMP)
 
 run: setup
 	$(BIN)/maptidal run --out $(RUN_DIR)
 
 test: setup
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
 
 # the tests against real ArduSub firmware: ARDUSUB_SITL=/path/to/ardusub make sitl-test (README, SITL)
 sitl-test: setup

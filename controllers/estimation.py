@@ -3,7 +3,7 @@
 The controllers run on this estimate, never on ground truth, so they behave alike on the simulator's
 sensors and on a real vehicle's telemetry. Frames: world x north (towards the OSB tank's end wall), y
 west (left), z up; body x forward, y left, z up. The input is a plain dict of readings, as
-``envs.simulation.Simulation.sensors`` returns and as a MAVLink bridge can fill from telemetry:
+``maptidal.envs.simulation.Simulation.sensors`` returns and as a MAVLink bridge can fill from telemetry:
 
     {"imu": {"accel": [ax, ay, az], "gyro": [p, q, r]},       # m/s^2 specific force, rad/s, body
      "depth": {"depth_m": d},                                   # m below the surface

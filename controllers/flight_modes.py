@@ -1,6 +1,6 @@
 """ArduSub's pilot flight modes on the estimated state: MANUAL, STABILIZE, ALT_HOLD and POSHOLD.
 
-The pilot's normalised 6-DOF command (:mod:`controllers.convention`) goes in, the mixer's input comes
+The pilot's normalised 6-DOF command (:mod:`maptidal.controllers.convention`) goes in, the mixer's input comes
 out, so one pilot input behaves alike in the simulator and on a vehicle. The command is the pilot's stick
 as ArduSub's RC channels carry it: MANUAL_CONTROL / 1000, after ArduSub's pilot gain.
 
@@ -24,14 +24,14 @@ We follow ArduPilot master (ArduSub 4.7.0-dev; the 4.5 behaviour of the depth ho
   - *Angle loop*: ``sqrt_controller`` of each axis's angle error with ATC_ANG_*_P = 6.0 and the
     acceleration limits ATC_ACCEL_R/P/Y_MAX (1100 deg/s^2; AC_ATC_SUB_ACCEL_Y_MAX_DEGSS for yaw) gives
     the target body rate.
-  - *Rate loops*: AC_PID (:class:`controllers.pid.ACPID`) with ArduSub's defaults, ATC_RAT_RLL/PIT
+  - *Rate loops*: AC_PID (:class:`maptidal.controllers.pid.ACPID`) with ArduSub's defaults, ATC_RAT_RLL/PIT
     P 0.135, I 0.090, D 0.0036, IMAX 0.444, FLTT = FLTD = 30 Hz; ATC_RAT_YAW P 0.180, I 0.018, D 0,
     IMAX 0.222, FLTT = FLTD = 5 Hz; FLTE 0. The integrator only shrinks while that axis's output is
     saturated (the motors' limit flag).
 - **ALT_HOLD**: STABILIZE, with the heave stick a climb rate: inside THR_DZ (100 of the throttle's
   0-1000, so +-0.2 of the stick) none, outside it PILOT_SPEED_UP / DN (500 cm/s) times the distance past
   the dead zone's edge; AC_PosControl holds the depth where the climb stops
-  (:class:`controllers.position_control.VerticalPositionControl`).
+  (:class:`maptidal.controllers.position_control.VerticalPositionControl`).
 - **POSHOLD**: ALT_HOLD, and centred surge and sway sticks hold the horizontal position with
   AC_PosControl's horizontal cascade, whose lean-angle outputs ArduSub sends to the forward and
   lateral thrusters (``translate_pos_control_rp``); it needs a position estimate (the DVL's dead
@@ -43,9 +43,11 @@ Euler angle error is used, which is close at the leans pilots fly).
 
 **Thrust linearisation.** ArduSub sends its loops' outputs to the thrusters linearly in PWM
 (``AP_Motors6DOF::calc_thrust_to_pwm``), while a T200 pushes nothing inside its deadband and then bends
-up roughly quadratically (:mod:`controllers.thrusters`). By default (``ModeParams.linearise_thrust``) the
+up roughly quadratically (:mod:`maptidal.controllers.thrusters`). By default
+(``ModeParams.linearise_thrust``) the
 mixer's outputs are read as fractions of each thruster's full thrust and the curve is inverted per
-thruster (:func:`controllers.thrusters.linearise_thrusters`, as ArduCopter linearises its propellers),
+thruster (:func:`maptidal.controllers.thrusters.linearise_thrusters`, as ArduCopter linearises its
+propellers),
 which keeps ArduSub's gains meaningful on the measured thrusters. Set it False for ArduSub's literal
 path, which the deadband and bend soften (``tests/test_feedback.py``).
 """
@@ -57,9 +59,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controllers.estimation import StateEstimate, wrap_angle
-from controllers.pid import ACPID, ACPIDGains, sqrt_controller
-from controllers.position_control import HorizontalPositionControl, PosControlGains, VerticalPositionControl
+from .estimation import StateEstimate, wrap_angle
+from .pid import ACPID, ACPIDGains, sqrt_controller
+from .position_control import HorizontalPositionControl, PosControlGains, VerticalPositionControl
 
 FLIGHT_MODES = ("manual", "stabilize", "alt_hold", "poshold")
 
@@ -96,7 +98,7 @@ class ModeParams:
     # POSHOLD: how far a surge or sway stick must move to take over from the position hold
     translation_dead_zone: float = 30.0 / 400.0
     # True (default): the mixer's outputs are read as fractions of each thruster's full thrust and the
-    # thrust curve is inverted to reach them (controllers.thrusters.linearise_thrusters; what
+    # thrust curve is inverted to reach them (maptidal.controllers.thrusters.linearise_thrusters; what
     # ArduCopter's MOT_THST_EXPO does for propellers). False: ArduSub's literal path, outputs linear in
     # PWM, which the T200's deadband and bend soften (module docstring)
     linearise_thrust: bool = True
@@ -156,7 +158,7 @@ class FlightController:
         # every loop here is ArduSub's, with ArduSub's gains, and takes the plant as linear in the command;
         # the thrust curve is either left to soften them (ArduSub's literal path) or linearised per
         # thruster after the mixer (ModeParams.linearise_thrust, applied by whoever drives the thrusters:
-        # controllers.thrusters.linearise_thrusters), so no vehicle model is needed here
+        # maptidal.controllers.thrusters.linearise_thrusters), so no vehicle model is needed here
         self.mode, self.surface_z_m = mode, surface_z_m
         self.params = params or ModeParams()
         self.rate = [ACPID(ATC_RATE_ROLL_PITCH), ACPID(ATC_RATE_ROLL_PITCH), ACPID(ATC_RATE_YAW)]

@@ -5,7 +5,7 @@ simulator's, streamed as MANUAL_CONTROL and RC overrides, and the vehicle's tele
         bridge.set_mode("stabilize")
         bridge.arm()
         bridge.set_command({"surge": 0.3})                  # streamed at 20 Hz until changed
-        estimate = bridge.telemetry.estimate()              # for controllers.pose, unchanged
+        estimate = bridge.telemetry.estimate()              # for maptidal.controllers.pose, unchanged
     # leaving the block sends neutral and disarms, also on an exception
 
 **Connection.** Any pymavlink URL: ``udpin:HOST:PORT`` (listen), ``udpout:HOST:PORT``,
@@ -45,9 +45,9 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.convention import pilot_command
-from controllers.estimation import StateEstimate, rotation_from_rpy
-from controllers.mavlink_wire import (
+from .convention import pilot_command
+from .estimation import StateEstimate, rotation_from_rpy
+from .mavlink_wire import (
     ARDUSUB_MODES,
     BRIDGE_MODES,
     GCS_SYSTEM_ID,
@@ -145,7 +145,8 @@ class VehicleTelemetry:
         return now - self.depths[self.depth_source][1]
 
     def estimate(self, surface_z_m: float = 0.0) -> StateEstimate:
-        """The telemetry as the :class:`controllers.estimation.StateEstimate` the feedback controllers
+        """The telemetry as the :class:`maptidal.controllers.estimation.StateEstimate` the feedback
+        controllers
         take: world x north, y west, z up with the surface at ``surface_z_m``; body velocity from
         LOCAL_POSITION_NED rotated into the body (zero until it arrives); depth from the pressure sensor
         while LOCAL_POSITION_NED has not come (a vehicle without a DVL)."""
@@ -316,7 +317,7 @@ class MavlinkBridge:
         self.wait_for(lambda t: not t.armed, timeout_s, "the vehicle to report disarmed")
 
     def set_mode(self, mode: str, timeout_s: float | None = None, retry_for_s: float = 0.0) -> None:
-        """Switch to ``mode`` (one of :data:`controllers.mavlink_wire.BRIDGE_MODES`) with
+        """Switch to ``mode`` (one of :data:`maptidal.controllers.mavlink_wire.BRIDGE_MODES`) with
         MAV_CMD_DO_SET_MODE, and wait for the acknowledgement and the heartbeat to show it. A vehicle
         that refuses (ArduSub refuses ALT_HOLD until its depth estimate is ready) is asked again once a
         second for up to ``retry_for_s`` seconds; then the last refusal is raised."""

@@ -1,7 +1,8 @@
 """ArduSub's MAVLink interface as plain data: the pilot command on the wire, the flight-mode numbers,
 and frame conversions between MAVLink's NED / FRD and our world (z up) and body (FLU) frames.
 
-Both ends use it: :mod:`controllers.mavlink_bridge` encodes, the simulator's MAVLink vehicle decodes, so
+Both ends use it: :mod:`maptidal.controllers.mavlink_bridge` encodes, the simulator's MAVLink vehicle
+decodes, so
 one 6-DOF pilot command means the same thing on a real ArduSub vehicle and in the simulator.
 
 **Pilot command on the wire** (ArduSub, ``ArduSub/joystick.cpp`` and the MANUAL_CONTROL definition):
@@ -17,7 +18,7 @@ one 6-DOF pilot command means the same thing on a real ArduSub vehicle and in th
 **Frames.** MAVLink's LOCAL_POSITION_NED is north-east-down, and ATTITUDE is the FRD body's roll,
 pitch and yaw (yaw clockwise from north). Our world has z up with x north and y west (so it stays
 right-handed), and our body is x forward, y left, z up; our pitch is positive nose down and our yaw
-counter-clockwise from +x (:mod:`controllers.estimation`). So roll is shared, and pitch, yaw and the
+counter-clockwise from +x (:mod:`maptidal.controllers.estimation`). So roll is shared, and pitch, yaw and the
 body y and z rates change sign.
 """
 
@@ -27,7 +28,7 @@ import math
 
 import numpy as np
 
-from controllers.convention import pilot_command
+from .convention import pilot_command
 
 # ArduSub's custom_mode numbers (ArduSub/defines.h)
 ARDUSUB_MODES: dict[str, int] = {
@@ -59,7 +60,8 @@ class WireError(ValueError):
 
 
 def encode_pilot(command) -> tuple[dict[str, int], list[int]]:
-    """A pilot command (anything :func:`controllers.convention.pilot_command` takes) as MANUAL_CONTROL
+    """A pilot command (anything :func:`maptidal.controllers.convention.pilot_command` takes) as
+    MANUAL_CONTROL
     fields ``{x, y, z, r}`` and the 8 channels of an RC_CHANNELS_OVERRIDE (roll and pitch)."""
     surge, sway, heave, roll, pitch, yaw = pilot_command(command)
     manual = {

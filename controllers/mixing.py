@@ -1,6 +1,6 @@
 """ArduSub's motor mixing for the BlueROV2 frames, and the physical allocation matrix.
 
-:func:`mix` turns a pilot command (:mod:`controllers.convention`) into normalised
+:func:`mix` turns a pilot command (:mod:`maptidal.controllers.convention`) into normalised
 thruster commands in [-1, 1] exactly as ArduSub's AP_Motors6DOF does
 (``output_armed_stabilizing``), including how it handles saturation:
 
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.convention import pilot_command
+from .convention import pilot_command
 
 # Rows: motors M1..; columns: roll, pitch, yaw, throttle, forward, lateral (AP_Motors6DOF).
 VECTORED_FACTORS = np.array(
@@ -81,7 +81,7 @@ _YAW_FORWARD_LATERAL = _6DOF_BY_PILOT_AXIS * np.array([1, 1, 0, 0, 0, 1], float)
 def mix(command, params: MixerParams | None = None) -> np.ndarray:
     """Thruster commands in [-1, 1] for a pilot command, as ArduSub mixes them.
 
-    ``command`` is anything :func:`controllers.convention.pilot_command` accepts.
+    ``command`` is anything :func:`maptidal.controllers.convention.pilot_command` accepts.
     Returns one value per motor, M1 first.
     """
     params = params or MixerParams()

@@ -14,7 +14,8 @@ for a quarter of the authority. zeta = 1 (critically damped). The quadratic damp
 design, only adds damping.
 
 The outputs are body-frame forces and torques, turned into the normalised 6-DOF pilot command of
-:mod:`controllers.convention` through the inverse of each axis's thrust curve (the T200's deadband and
+:mod:`maptidal.controllers.convention` through the inverse of each axis's thrust curve (the T200's deadband
+and
 bend, :meth:`VehicleModel.pilot_command`), so the loops see a linear plant and the same command drives
 the simulator's mixer and a real vehicle over MAVLink.
 """
@@ -27,15 +28,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controllers.estimation import MotionModel, StateEstimate, rotation_from_rpy, wrap_angle
-from controllers.mixing import MixerParams, allocation_matrix, mix
-from controllers.pid import PID, PIDGains
-from controllers.thrusters import PwmRange, ThrustCurve
-from controllers.trajectory import MotionLimits, PoseReference, TrapezoidalProfile
+from .estimation import MotionModel, StateEstimate, rotation_from_rpy, wrap_angle
+from .mixing import MixerParams, allocation_matrix, mix
+from .pid import PID, PIDGains
+from .thrusters import PwmRange, ThrustCurve
+from .trajectory import MotionLimits, PoseReference, TrapezoidalProfile
 
 # index of each body axis (x, y, z, roll, pitch, yaw) in the pilot command, and the sign that turns a
 # body-frame force or torque into that pilot axis (sway is right = -y, pitch is nose up = -y torque,
-# yaw is turn right = -z torque; controllers.convention)
+# yaw is turn right = -z torque; maptidal.controllers.convention)
 PILOT_SIGN = np.array([1.0, -1.0, 1.0, 1.0, -1.0, -1.0])
 _COMMAND_GRID = np.linspace(0.0, 1.0, 101)
 
@@ -77,7 +78,7 @@ class VehicleModel:
 
     def motion_model(self) -> MotionModel:
         """The translational part of this model, for dead reckoning without a DVL
-        (:class:`controllers.estimation.MotionModel`)."""
+        (:class:`maptidal.controllers.estimation.MotionModel`)."""
         return MotionModel(
             inertia=tuple(self.inertia[:3]),
             linear_damping=tuple(self.linear_damping[:3]),

@@ -35,8 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.estimation import StateEstimate, rotation_from_rpy
-from controllers.pid import inverse_sqrt_controller, sqrt_controller
+from .estimation import StateEstimate, rotation_from_rpy
+from .pid import inverse_sqrt_controller, sqrt_controller
 
 GRAVITY = 9.80665
 

@@ -1,7 +1,7 @@
 """Task execution: fly to an inspection pose, hold it within tolerance for a dwell, then say "capture".
 
-The executor is a small state machine over :class:`controllers.pose.PoseController` and
-:class:`controllers.trajectory.PoseTrajectory`, run on the estimated state:
+The executor is a small state machine over :class:`maptidal.controllers.pose.PoseController` and
+:class:`maptidal.controllers.trajectory.PoseTrajectory`, run on the estimated state:
 
     approach  -> the reference follows a smooth trajectory to the task pose
     hold      -> within tolerance (default 0.1 m and 5 deg); the dwell clock runs, and restarts if the
@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controllers.estimation import StateEstimate, wrap_angle
-from controllers.pose import PoseController
-from controllers.trajectory import MotionLimits, PoseTrajectory
+from .estimation import StateEstimate, wrap_angle
+from .pose import PoseController
+from .trajectory import MotionLimits, PoseTrajectory
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.estimation import wrap_angle
+from .estimation import wrap_angle
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
 """The MuJoCo simulation: world building, hydrodynamics, sensors, rendering and the
-Gymnasium environments (registered on import: ``envs.gym``). It may import
+Gymnasium environments (registered on import: ``maptidal.envs.gym``). It may import
 ``controllers`` and maptidal's pure modules, never maptidal.mission or maptidal.cli.
 
 Headless rendering through EGL is the default (CPU-only machines through Mesa, and NVIDIA GPUs): it is
@@ -11,6 +11,6 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from envs.gym import register_environments  # after the rendering defaults
+from maptidal.envs.gym import register_environments  # after the rendering defaults
 
 register_environments()

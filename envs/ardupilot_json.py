@@ -41,10 +41,9 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-
-from controllers.mavlink_wire import flu_from_frd, ned_from_world
-from controllers.thrusters import pwm_to_command
-from envs.simulation import Simulation
+from maptidal.controllers.mavlink_wire import flu_from_frd, ned_from_world
+from maptidal.controllers.thrusters import pwm_to_command
+from maptidal.envs.simulation import Simulation
 
 SERVO_16 = struct.Struct("<HHI16H")
 SERVO_32 = struct.Struct("<HHI32H")

@@ -1,6 +1,6 @@
 """The underwater image model as a fragment shader, run in the renderer's own GL context.
 
-:class:`envs.water.WaterModel` evaluates the model on the CPU after the colour and depth
+:class:`maptidal.envs.water.WaterModel` evaluates the model on the CPU after the colour and depth
 buffers are read back. On a GPU the render itself takes about a millisecond, so that
 read-back and arithmetic dominate. :class:`GLWaterPass` evaluates the same formula
 where the buffers already are:
@@ -34,9 +34,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import mujoco
 import numpy as np
+from maptidal.envs.water import WaterParams, visibility_limit_m
 from OpenGL import GL
-
-from envs.water import WaterParams, visibility_limit_m
 
 _VERTEX_SHADER = """
 #version 130
@@ -150,7 +149,7 @@ class GLWaterPass:
     """The water model on the GL side of one ``mujoco.Renderer`` (its context must be current).
 
     Create it through :func:`make_gl_water_pass`, which returns None where shaders are unavailable;
-    :mod:`envs.rendering` keeps one per renderer."""
+    :mod:`maptidal.envs.rendering` keeps one per renderer."""
 
     def __init__(self, renderer: mujoco.Renderer, geometry: CameraGeometry) -> None:
         self.renderer = renderer

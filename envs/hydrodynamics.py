@@ -24,7 +24,7 @@ Control, 2011, with diagonal added mass and damping)::
   water surface. ``a`` (MuJoCo actuator state) is the normalised thrust after the 0.1 s lag;
   what the lag filters is the static thrust of the command through ArduSub's linear
   command-to-PWM mapping and the T200's measured curve with its deadband
-  (:mod:`controllers.thrusters`, applied by ``Simulation`` when it sets the controls).
+  (:mod:`maptidal.controllers.thrusters`, applied by ``Simulation`` when it sets the controls).
 
 **Added mass.** MuJoCo's body mass is one scalar, and the BlueROV2's added mass is
 anisotropic (Heavy: 6.4 kg in surge, 18.7 kg in heave), so it cannot be folded into
@@ -61,8 +61,7 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-
-from envs.vehicle import VehicleParams
+from maptidal.envs.vehicle import VehicleParams
 
 log = logging.getLogger(__name__)
 
@@ -254,8 +253,8 @@ def passive_forces(model: mujoco.MjModel, data: mujoco.MjData) -> None:
 
 
 def _vehicle_from_block(block, layout, mass, inertia) -> VehicleParams:
-    from controllers.thrusters import linear_curve
-    from envs.vehicle import ThrusterParams
+    from maptidal.controllers.thrusters import linear_curve
+    from maptidal.envs.vehicle import ThrusterParams
 
     return VehicleParams(
         frame="packed",

@@ -1,17 +1,19 @@
 """The simulator as a MAVLink vehicle: one MuJoCo BlueROV2 behind an endpoint that behaves like
-ArduSub for the subset a ground station and :mod:`controllers.mavlink_bridge` use.
+ArduSub for the subset a ground station and :mod:`maptidal.controllers.mavlink_bridge` use.
 
 It provides:
 
 - HEARTBEAT once a second as a submarine (MAV_TYPE_SUBMARINE) with the ArduPilot autopilot, its
   armed flag and ArduSub's custom_mode numbers; SYS_STATUS and AUTOPILOT_VERSION;
 - arming and disarming (MAV_CMD_COMPONENT_ARM_DISARM) and the modes MANUAL, STABILIZE, ALT_HOLD,
-  POSHOLD (ArduSub's, from :mod:`controllers.flight_modes`) and GUIDED (SET_POSITION_TARGET_LOCAL_NED,
-  flown by :class:`controllers.pose.PoseController`), by MAV_CMD_DO_SET_MODE or SET_MODE; a COMMAND_ACK
+  POSHOLD (ArduSub's, from :mod:`maptidal.controllers.flight_modes`) and GUIDED
+  (SET_POSITION_TARGET_LOCAL_NED,
+  flown by :class:`maptidal.controllers.pose.PoseController`), by MAV_CMD_DO_SET_MODE or SET_MODE; a
+  COMMAND_ACK
   for every command, MAV_RESULT_UNSUPPORTED for those it does not implement and DENIED for a mode
   the robot cannot fly (POSHOLD and GUIDED need a DVL);
 - MANUAL_CONTROL and RC_CHANNELS_OVERRIDE (roll and pitch, channels 1 and 2), taken only from the
-  ground station's system id (SYSID_MYGCS, 255), decoded by :mod:`controllers.mavlink_wire`;
+  ground station's system id (SYSID_MYGCS, 255), decoded by :mod:`maptidal.controllers.mavlink_wire`;
 - ArduSub's pilot failsafe: with no MANUAL_CONTROL for FS_PILOT_TIMEOUT (3 s) of simulated time the
   pilot input goes neutral (a STATUSTEXT says so) until input returns;
 - telemetry at ArduSub-like rates from the vehicle's own estimate (its sensors, dead reckoning), never
@@ -37,9 +39,8 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from controllers.estimation import DeadReckoning, EstimatorParams, rotation_from_rpy
-from controllers.mavlink_wire import (
+from maptidal.controllers.estimation import DeadReckoning, EstimatorParams, rotation_from_rpy
+from maptidal.controllers.mavlink_wire import (
     ARDUSUB_MODES,
     GCS_SYSTEM_ID,
     MODE_NAMES,
@@ -52,11 +53,11 @@ from controllers.mavlink_wire import (
     rpy_to_ned,
     world_from_ned,
 )
-from controllers.pose import PoseController
-from controllers.thrusters import command_to_pwm
-from controllers.trajectory import PoseReference
-from envs.simulation import Simulation
-from envs.world import DEPTH_SENSOR_POSITION
+from maptidal.controllers.pose import PoseController
+from maptidal.controllers.thrusters import command_to_pwm
+from maptidal.controllers.trajectory import PoseReference
+from maptidal.envs.simulation import Simulation
+from maptidal.envs.world import DEPTH_SENSOR_POSITION
 
 log = logging.getLogger(__name__)
 
@@ -158,7 +159,7 @@ class VehicleCounters:
 
 
 class SimVehicle:
-    """A :class:`envs.simulation.Simulation` robot behind a MAVLink endpoint (module docstring)."""
+    """A :class:`maptidal.envs.simulation.Simulation` robot behind a MAVLink endpoint (module docstring)."""
 
     def __init__(
         self,

@@ -4,7 +4,7 @@
 ``egl``, which renders through Mesa on a CPU-only machine and on NVIDIA GPUs.
 Each camera is drawn once (``mjr_render``). Then either its colour and depth buffers are read
 back from that pass (``mjr_readPixels``) for the CPU water model, or the water model runs as a
-shader on the same buffers (:func:`render_camera_underwater`, :mod:`envs.gl_water`) and only the
+shader on the same buffers (:func:`render_camera_underwater`, :mod:`maptidal.envs.gl_water`) and only the
 finished image is read back. Neither costs an extra render pass.
 """
 
@@ -20,15 +20,14 @@ import contextlib
 import cv2
 import mujoco
 import numpy as np
-
-from envs.gl_water import (
+from maptidal.envs.gl_water import (
     CameraGeometry,
     GLWaterPass,
     is_software_renderer,
     make_gl_water_pass,
     renderer_description,
 )
-from envs.water import WaterParams
+from maptidal.envs.water import WaterParams
 
 # What a camera in the water sees: surfaces only. MuJoCo's default options also draw rangefinder rays
 # (the DVL beams, as bright yellow lines in other robots' images), sites and the like.
@@ -259,7 +258,7 @@ def render_camera_underwater(
     with_depth: bool = False,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Like :func:`render_camera` with ``raw_depth=True``, but the water model runs on the GL side
-    (:mod:`envs.gl_water`) and the returned RGB is already the underwater image. Call
+    (:mod:`maptidal.envs.gl_water`) and the returned RGB is already the underwater image. Call
     :func:`gl_water_available` first: this raises RuntimeError where the shader cannot run."""
     renderer = _draw(model, scene, height, width)
     water_pass = _water_pass(renderer, geometry)

@@ -2,7 +2,7 @@
 
 Example::
 
-    from envs.simulation import Simulation
+    from maptidal.envs.simulation import Simulation
     sim = Simulation("assets/scenarios/default.toml")
     sim.reset(seed=1)
     for _ in range(100):
@@ -10,12 +10,13 @@ Example::
     print(sim.ground_truth("rov0")["position"], sim.sensors("rov0")["depth"])
     left, right = sim.render_stereo("rov0")
 
-Commands are the normalised 6-DOF pilot command of :mod:`controllers.convention`,
+Commands are the normalised 6-DOF pilot command of :mod:`maptidal.controllers.convention`,
 mixed into thruster commands by ArduSub's mixer for the robot's frame; pass
 ``mode="thrusters"`` to command each thruster directly (M1 first, in [-1, 1]).
 
 ``Simulation(..., flight_mode="stabilize")`` or :meth:`Simulation.set_flight_mode` flies a robot in an
-ArduSub flight mode (:mod:`controllers.flight_modes`: manual, stabilize, alt_hold, poshold) on the state
+ArduSub flight mode (:mod:`maptidal.controllers.flight_modes`: manual, stabilize, alt_hold, poshold) on the
+state
 estimated from its own sensors; the API's default is "manual", so that a pilot command is exactly the
 mixer's input, while ``maptidal sim`` flies STABILIZE, as ArduSub pilots do.
 """
@@ -35,16 +36,15 @@ from pathlib import Path
 import cv2
 import mujoco
 import numpy as np
-
-from controllers.convention import pilot_command
-from controllers.estimation import DeadReckoning, EstimatorParams, StateEstimate, rpy_from_rotation
-from controllers.flight_modes import FLIGHT_MODES, FlightController, ModeParams
-from controllers.mixing import MixerParams, mix
-from controllers.pose import VehicleModel
-from controllers.thrusters import linearise_thrusters
-from envs import hydrodynamics
-from envs.gl_water import CameraGeometry
-from envs.rendering import (
+from maptidal.controllers.convention import pilot_command
+from maptidal.controllers.estimation import DeadReckoning, EstimatorParams, StateEstimate, rpy_from_rotation
+from maptidal.controllers.flight_modes import FLIGHT_MODES, FlightController, ModeParams
+from maptidal.controllers.mixing import MixerParams, mix
+from maptidal.controllers.pose import VehicleModel
+from maptidal.controllers.thrusters import linearise_thrusters
+from maptidal.envs import hydrodynamics
+from maptidal.envs.gl_water import CameraGeometry
+from maptidal.envs.rendering import (
     check_render_samples,
     depth_coefficients,
     geoms_behind_camera,
@@ -55,10 +55,11 @@ from envs.rendering import (
     renders_on_gpu,
     update_camera_scene,
 )
-from envs.scenario import Scenario, check_current, load_scenario
-from envs.sensors import RobotSensors
-from envs.water import WaterModel, depth_to_range, worker_thread
-from envs.world import DEPTH_SENSOR_POSITION, RobotPlacement, camera_offsets, compose
+from maptidal.envs.scenario import Scenario, check_current, load_scenario
+from maptidal.envs.sensors import RobotSensors
+from maptidal.envs.water import WaterModel, depth_to_range, worker_thread
+from maptidal.envs.world import DEPTH_SENSOR_POSITION, RobotPlacement, camera_offsets, compose
+
 from maptidal.camera import StereoCameraParams
 
 WATER_BACKENDS = ("auto", "gl", "cpu", "prefer-gl")
@@ -184,7 +185,7 @@ class Simulation:
         self.wall_time_s = 0.0
         # the process-wide renderer of this model (and its GL context) goes when the simulation does
         self._release_renderer = weakref.finalize(self, release, self.model)
-        self._release_renderer.atexit = False  # at exit, envs.rendering frees every renderer itself
+        self._release_renderer.atexit = False  # at exit, maptidal.envs.rendering frees every renderer itself
         self._flight_modes = dict.fromkeys(self.robots, flight_mode)
         self._autopilots: dict[str, _Autopilot] = {}
         self._thruster_outputs: dict[str, np.ndarray] = {}
@@ -273,7 +274,8 @@ class Simulation:
 
     def set_flight_mode(self, robot: str, mode: str) -> None:
         """Fly ``robot`` in an ArduSub flight mode: "manual" (the pilot command goes to the mixer),
-        "stabilize", "alt_hold" or "poshold" (:mod:`controllers.flight_modes`), on the state estimated
+        "stabilize", "alt_hold" or "poshold" (:mod:`maptidal.controllers.flight_modes`), on the state
+        estimated
         from the robot's own sensors, started at its current pose as a vehicle's estimator would be."""
         self._check(robot)
         if mode not in FLIGHT_MODES:
@@ -332,7 +334,8 @@ class Simulation:
 
     def estimate(self, robot: str) -> StateEstimate:
         """``robot``'s dead-reckoned state from its own sensors, as of the end of the last control period
-        (:class:`controllers.estimation.DeadReckoning`): what its flight mode flies on. Robots in MANUAL
+        (:class:`maptidal.controllers.estimation.DeadReckoning`): what its flight mode flies on. Robots in
+        MANUAL
         have one after :meth:`track_estimate`."""
         if self._check(robot) not in self._estimators:
             raise ValueError(f"{robot} keeps no estimate in MANUAL: call track_estimate({robot!r}) first")
@@ -573,7 +576,7 @@ class Simulation:
     @property
     def water_backend(self) -> str:
         """Where the water model runs: ``"gl"`` (a shader in the renderer's context) or ``"cpu"``
-        (:class:`envs.water.WaterModel`). ``"gl"`` at construction raises RuntimeError where the
+        (:class:`maptidal.envs.water.WaterModel`). ``"gl"`` at construction raises RuntimeError where the
         shader cannot run. ``"auto"`` picks GL on a GPU and the CPU model on a CPU rasteriser
         (Mesa llvmpipe), where the shader is no faster when drawing is all the process does (README,
         rendering bench). ``"prefer-gl"`` takes the shader wherever it runs, else the CPU model: the
@@ -638,5 +641,5 @@ class _Autopilot:
 
 def rpy_from_matrix(rotation: np.ndarray) -> tuple[float, float, float]:
     """Roll, pitch, yaw (rad; ZYX about the world axes, z up) from a body-to-world rotation (the
-    estimator's own conversion, :func:`controllers.estimation.rpy_from_rotation`)."""
+    estimator's own conversion, :func:`maptidal.controllers.estimation.rpy_from_rotation`)."""
     return rpy_from_rotation(np.asarray(rotation))

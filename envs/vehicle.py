@@ -14,9 +14,9 @@ from functools import cache
 from pathlib import Path
 
 import numpy as np
+from maptidal.controllers.pose import VehicleModel
+from maptidal.controllers.thrusters import PwmRange, ThrustCurve, linear_curve, t200_curve
 
-from controllers.pose import VehicleModel
-from controllers.thrusters import PwmRange, ThrustCurve, linear_curve, t200_curve
 from maptidal.paths import asset
 
 VEHICLE_FILE = asset("bluerov2", "bluerov2.toml")
@@ -35,7 +35,7 @@ class ThrusterParams:
     """Blue Robotics T200 thrusters: the thrust curve, ArduSub's PWM range, the lag and the surface fade.
 
     model: "t200" (the maker's measured thrust against pulse width at ``voltage_v``, with its deadband;
-    :mod:`controllers.thrusters`) or "linear" (thrust proportional to command with the same maxima,
+    :mod:`maptidal.controllers.thrusters`) or "linear" (thrust proportional to command with the same maxima,
     for studies). pwm_min_us, pwm_max_us: ArduSub's MOT_PWM_MIN and MOT_PWM_MAX, through which a
     thruster command maps linearly to pulse width. time_constant_s: first-order lag of the thrust
     towards the curve's static thrust (the curve acts first, as a propeller's speed lags its ESC).
@@ -166,7 +166,8 @@ class VehicleParams:
         return np.array([self.mass] * 3 + list(self.inertia))
 
     def controller_model(self) -> VehicleModel:
-        """What :mod:`controllers.pose` needs of this vehicle: M_RB + M_A, linear damping, thrusters."""
+        """What :mod:`maptidal.controllers.pose` needs of this vehicle: M_RB + M_A, linear damping,
+        thrusters."""
         return VehicleModel(
             inertia=tuple(float(v) for v in self.rigid_body_mass() + np.asarray(self.added_mass)),
             linear_damping=tuple(self.linear_damping),

@@ -8,9 +8,8 @@ from collections.abc import Mapping, Sequence
 import cv2
 import mujoco
 import numpy as np
-
-from envs.rendering import CAMERA_SCENE_OPTION
-from envs.simulation import Simulation
+from maptidal.envs.rendering import CAMERA_SCENE_OPTION
+from maptidal.envs.simulation import Simulation
 
 
 def follow_camera(sim: Simulation, robot: str, n_robots: int = 1) -> mujoco.MjvCamera:

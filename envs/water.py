@@ -84,7 +84,7 @@ def _noise_bank() -> np.ndarray:
     the simulation's seeded generator), which costs a slice instead of 768k fresh draws per frame.
     Windows of two frames may overlap, so one frame's noise can reappear in another shifted by the
     offsets' difference, but at the same pixels only if the offsets coincide (1 in 3.4 million).
-    The GL water pass (:mod:`envs.gl_water`) hashes each pixel instead and has no such overlap."""
+    The GL water pass (:mod:`maptidal.envs.gl_water`) hashes each pixel instead and has no such overlap."""
     if not _bank:
         _bank.append(np.random.default_rng(20260).standard_normal(_NOISE_BANK_SIZE, dtype=np.float32))
     return _bank[0]

@@ -14,21 +14,21 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from maptidal.envs.hydrodynamics import userdata_size
+from maptidal.envs.textures import TextureParams, concrete_texture, floor_texture, fouling_texture
+from maptidal.envs.vehicle import VehicleParams
 
-from envs.hydrodynamics import userdata_size
-from envs.textures import TextureParams, concrete_texture, floor_texture, fouling_texture
-from envs.vehicle import VehicleParams
 from maptidal.camera import StereoCameraParams
 from maptidal.tank import TankModel
 
 WALL_THICKNESS = 0.1  # m, collision boxes behind each surface
 # Geom groups: 0 the tank's surfaces and the ladder (the geometry of maptidal.tank.TankModel) and the
 # robots' visible parts; 1 thin decorations on the surfaces (window frame, fouling discs); 3 the
-# invisible collision geoms. Cameras draw groups 0 to 2 (envs.rendering).
+# invisible collision geoms. Cameras draw groups 0 to 2 (maptidal.envs.rendering).
 DECORATION_GROUP = 1
 DEPTH_SENSOR_POSITION = (-0.1, 0.0, 0.1)  # m from the CG: the pressure sensor on the electronics tube's end
 _S = mujoco.mjtSensor
-# Every robot's MuJoCo sensors: (name, type, site); envs.sensors reads them by these names.
+# Every robot's MuJoCo sensors: (name, type, site); maptidal.envs.sensors reads them by these names.
 ROBOT_SENSORS: tuple[tuple[str, mujoco.mjtSensor, str], ...] = (
     ("accelerometer", _S.mjSENS_ACCELEROMETER, "imu"),
     ("gyro", _S.mjSENS_GYRO, "imu"),

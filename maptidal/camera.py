@@ -12,7 +12,7 @@ binned mode, with square pixels and the principal point at the image centre. A p
 that focal length spans 78.5 x 54.1 deg at 640 x 400; the spec sheet's 80 x 55 deg includes
 the lens's small distortion, which we do not model.
 
-Rendering (``envs``), the synthetic keyframes, the frustum of discovery and coverage, and
+Rendering (``maptidal.envs``), the synthetic keyframes, the frustum of discovery and coverage, and
 ``Simulation.intrinsics()`` all take their numbers from here.
 """
 

@@ -5,15 +5,14 @@ import math
 
 import numpy as np
 import pytest
-
-from controllers.estimation import StateEstimate
-from controllers.flight_modes import (
+from maptidal.controllers.estimation import StateEstimate
+from maptidal.controllers.flight_modes import (
     ModeParams,
     dead_zone,
     pilot_climb_rate,
     pilot_lean_angles,
 )
-from controllers.pid import (
+from maptidal.controllers.pid import (
     ACPID,
     PID,
     ACPIDGains,
@@ -22,8 +21,8 @@ from controllers.pid import (
     lowpass_alpha,
     sqrt_controller,
 )
-from controllers.position_control import VerticalPositionControl
-from controllers.thrusters import T200_16V, linearise_thrusters
+from maptidal.controllers.position_control import VerticalPositionControl
+from maptidal.controllers.thrusters import T200_16V, linearise_thrusters
 
 
 def test_our_pid_integrates_while_unsaturated_and_stops_when_saturated():
@@ -140,7 +139,7 @@ def test_reverse_thrust_is_linearised_against_the_reverse_maximum():
 
 
 def test_manual_control_out_of_range_is_clamped_as_ardusub_clamps_it():
-    from controllers.mavlink_wire import WireError, decode_manual_control, manual_control_in_range
+    from maptidal.controllers.mavlink_wire import WireError, decode_manual_control, manual_control_in_range
 
     np.testing.assert_allclose(decode_manual_control(5000, -3000, 1200, 0), [1.0, -1.0, 1.0, 0.0])
     np.testing.assert_allclose(decode_manual_control(500, 0, -20, -1000), [0.5, 0.0, -1.0, -1.0])

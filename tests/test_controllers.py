@@ -4,10 +4,15 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from controllers.convention import AXES, CommandError, parse_command, pilot_command
-from controllers.mixing import VECTORED_6DOF_FACTORS, VECTORED_FACTORS, MixerParams, allocation_matrix, mix
-from envs.vehicle import load_vehicle
+from maptidal.controllers.convention import AXES, CommandError, parse_command, pilot_command
+from maptidal.controllers.mixing import (
+    VECTORED_6DOF_FACTORS,
+    VECTORED_FACTORS,
+    MixerParams,
+    allocation_matrix,
+    mix,
+)
+from maptidal.envs.vehicle import load_vehicle
 
 
 def literal_ardusub(command, frame, coupling=1.0):

@@ -6,8 +6,7 @@ import math
 
 import numpy as np
 import pytest
-
-from controllers.estimation import (
+from maptidal.controllers.estimation import (
     DeadReckoning,
     EstimatorParams,
     quaternion_from_rpy,
@@ -15,9 +14,10 @@ from controllers.estimation import (
     rpy_from_rotation,
     wrap_angle,
 )
-from envs.scenario import RobotSpec, Scenario
-from envs.simulation import Simulation
-from envs.vehicle import load_vehicle
+from maptidal.envs.scenario import RobotSpec, Scenario
+from maptidal.envs.simulation import Simulation
+from maptidal.envs.vehicle import load_vehicle
+
 from maptidal.tank import TankModel, open_water_config
 
 

@@ -5,11 +5,11 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from maptidal.envs.export import ROBOT_FILE_HEADER, export_world, robot_xml
+from maptidal.envs.scenario import load_scenario
+from maptidal.envs.simulation import Simulation
+from maptidal.envs.vehicle import FRAMES, load_vehicle
 
-from envs.export import ROBOT_FILE_HEADER, export_world, robot_xml
-from envs.scenario import load_scenario
-from envs.simulation import Simulation
-from envs.vehicle import FRAMES, load_vehicle
 from maptidal.cli import main
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
@@ -18,7 +18,9 @@ ASSETS = Path(__file__).resolve().parent.parent / "assets"
 @pytest.mark.parametrize("frame", FRAMES)
 def test_committed_robot_files_are_what_the_exporter_writes(frame):
     committed = (ASSETS / "bluerov2" / f"bluerov2_{frame}.xml").read_text()
-    assert committed == ROBOT_FILE_HEADER + robot_xml(load_vehicle(frame)), "run `python -m envs.export`"
+    assert committed == ROBOT_FILE_HEADER + robot_xml(load_vehicle(frame)), (
+        "run `python -m maptidal.envs.export`"
+    )
 
 
 @pytest.mark.parametrize("frame", FRAMES)

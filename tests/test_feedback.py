@@ -6,13 +6,12 @@ import math
 
 import numpy as np
 import pytest
-
-from controllers.estimation import DeadReckoning, EstimatorParams, wrap_angle
-from controllers.flight_modes import ModeParams
-from controllers.pid import PID, PIDGains
-from controllers.pose import DepthHold, HeadingHold, PoseController, pole_placement_gains
-from controllers.task import TaskExecutor, TaskParams
-from controllers.trajectory import (
+from maptidal.controllers.estimation import DeadReckoning, EstimatorParams, wrap_angle
+from maptidal.controllers.flight_modes import ModeParams
+from maptidal.controllers.pid import PID, PIDGains
+from maptidal.controllers.pose import DepthHold, HeadingHold, PoseController, pole_placement_gains
+from maptidal.controllers.task import TaskExecutor, TaskParams
+from maptidal.controllers.trajectory import (
     Hold,
     MotionLimits,
     PoseReference,
@@ -20,9 +19,10 @@ from controllers.trajectory import (
     Route,
     TrapezoidalProfile,
 )
-from envs.scenario import RobotSpec, Scenario
-from envs.simulation import Simulation
-from envs.vehicle import load_vehicle
+from maptidal.envs.scenario import RobotSpec, Scenario
+from maptidal.envs.simulation import Simulation
+from maptidal.envs.vehicle import load_vehicle
+
 from maptidal.tank import TankModel, open_water_config
 
 # ----- units -------------------------------------------------------------------------------------
@@ -93,7 +93,7 @@ def test_gains_follow_the_pole_placement_rule():
 
 OPEN_WATER = TankModel(open_water_config(30.0))
 START = (-15.0, 0.0, 15.0)
-DEPTH_SENSOR = (-0.1, 0.0, 0.1)  # the "depth" site of envs.world.build_robot_spec
+DEPTH_SENSOR = (-0.1, 0.0, 0.1)  # the "depth" site of maptidal.envs.world.build_robot_spec
 
 
 class Loop:
@@ -371,8 +371,8 @@ def test_position_control_is_ardusubs_cascade_with_its_defaults():
     """Hand-worked AC_PosControl steps with ArduSub's PSC_* defaults (controllers/position_control.py):
     vertical, a 0.1 m error climbing at 0.05 m/s and accelerating at 0.2 m/s^2; horizontal, a 0.2 m
     error ahead at rest, heading along +x."""
-    from controllers.estimation import StateEstimate
-    from controllers.position_control import HorizontalPositionControl, VerticalPositionControl
+    from maptidal.controllers.estimation import StateEstimate
+    from maptidal.controllers.position_control import HorizontalPositionControl, VerticalPositionControl
 
     estimate = StateEstimate(position=np.array([0.0, 0.0, -1.0]), velocity_body=np.array([0.0, 0.0, 0.05]))
     estimate.acceleration_world = np.array([0.0, 0.0, 0.2])

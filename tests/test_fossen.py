@@ -12,15 +12,15 @@ import mujoco
 import numpy as np
 import pytest
 from fossen_oracle import normalised, read_vehicle, simulate, thrust
+from maptidal.controllers.mixing import MixerParams, mix
+from maptidal.envs.hydrodynamics import hull_wet_fraction
+from maptidal.envs.scenario import RobotSpec, Scenario
+from maptidal.envs.sensors import SensorNoise
+from maptidal.envs.simulation import Simulation
+from maptidal.envs.vehicle import load_vehicle
 from scipy.linalg import expm
 from scipy.optimize import brentq
 
-from controllers.mixing import MixerParams, mix
-from envs.hydrodynamics import hull_wet_fraction
-from envs.scenario import RobotSpec, Scenario
-from envs.sensors import SensorNoise
-from envs.simulation import Simulation
-from envs.vehicle import load_vehicle
 from maptidal.tank import TankModel, open_water_config
 
 G = 9.81
@@ -375,7 +375,8 @@ def test_mixer_factors_are_ardusubs_on_all_six_axes():
 
 @pytest.mark.parametrize("frame", ["heavy", "standard"])
 def test_roll_and_pitch_commands_turn_the_vehicle_the_named_way(frame):
-    """Roll right side down and, on the Heavy, pitch nose up (controllers.convention), in the physics."""
+    """Roll right side down and, on the Heavy, pitch nose up (maptidal.controllers.convention), in the
+    physics."""
     sim = open_water(frame)
     vehicle = sim.scenario.robots[0].vehicle
     _, _, _, velocities = fly(sim, mix({"roll": 0.4}, MixerParams(vehicle.ardusub_frame)), 0.5)

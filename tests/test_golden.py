@@ -58,7 +58,8 @@ def test_the_front_end_and_discovery_reproduce_the_golden_outputs(golden):
 def test_a_fresh_render_of_the_golden_poses_matches_the_committed_frames(golden):
     import sys
 
-    from envs.simulation import Simulation
+    from maptidal.envs.simulation import Simulation
+
     from maptidal.mission.capture import place_camera
 
     sys.path.insert(0, str(GOLDEN.parent))

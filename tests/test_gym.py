@@ -6,14 +6,13 @@ from __future__ import annotations
 import math
 
 import gymnasium
+import maptidal.envs  # noqa: F401  (registers the MapTidal/ environments)
 import numpy as np
 import pytest
 from absl.testing import absltest
 from dm_env import test_utils
 from gymnasium.utils.env_checker import check_env
-
-import envs  # noqa: F401  (registers the MapTidal/ environments)
-from envs.gym.tank_inspection import camera_viewpoint
+from maptidal.envs.gym.tank_inspection import camera_viewpoint
 
 ENV_IDS = ("MapTidal/GoToPose-v0", "MapTidal/StationKeeping-v0", "MapTidal/TankInspection-v0")
 
@@ -197,9 +196,8 @@ class _FakeViewer:
 
 
 def test_human_rendering_drives_mujocos_passive_viewer(monkeypatch):
+    import maptidal.envs.gym.core as core
     import mujoco.viewer
-
-    import envs.gym.core as core
 
     monkeypatch.setattr(core, "_has_display", lambda: True)
     monkeypatch.setattr(
@@ -221,8 +219,8 @@ def test_human_rendering_drives_mujocos_passive_viewer(monkeypatch):
 
 
 def test_human_rendering_without_a_display_says_so(monkeypatch):
-    import envs.gym.core as core
-    from envs.gym.go_to_pose import GoToPoseEnv
+    import maptidal.envs.gym.core as core
+    from maptidal.envs.gym.go_to_pose import GoToPoseEnv
 
     monkeypatch.setattr(core, "_has_display", lambda: False)
     # (gymnasium.make would instead wrap rgb_array in its own pygame window, HumanRendering)
@@ -231,10 +229,9 @@ def test_human_rendering_without_a_display_says_so(monkeypatch):
 
 
 def test_dm_viewer_is_handed_a_working_environment_factory(monkeypatch):
+    import maptidal.envs.gym.core as core
     from dm_control import viewer
-
-    import envs.gym.core as core
-    from envs.gym.dm_tasks import view
+    from maptidal.envs.gym.dm_tasks import view
 
     handed = {}
     monkeypatch.setattr(core, "_has_display", lambda: True)
@@ -313,9 +310,8 @@ def test_a_linear_policy_trained_by_the_cross_entropy_method_reaches_the_target(
 
 # ----- the team task and PettingZoo -----------------------------------------------------------------
 def test_team_inspection_passes_the_checkers_of_gymnasium_and_pettingzoo():
+    from maptidal.envs.gym.team_inspection import parallel_env
     from pettingzoo.test import parallel_api_test
-
-    from envs.gym.team_inspection import parallel_env
 
     env = gymnasium.make("MapTidal/TeamInspection-v0")
     try:
@@ -349,7 +345,7 @@ def test_the_team_shares_one_reward_for_what_any_robot_sees():
 
 
 def _viewpoint(inner, name):
-    from envs.gym.tank_inspection import camera_viewpoint
+    from maptidal.envs.gym.tank_inspection import camera_viewpoint
 
     return camera_viewpoint(inner.sim.ground_truth(name), inner.vehicle.sensors.camera_position)
 
@@ -377,7 +373,7 @@ class GoToPoseDmEnvTest(test_utils.EnvironmentTestMixin, absltest.TestCase):
     """dm_env's own conformance tests on the dm_control version of GoToPose."""
 
     def make_object_under_test(self):
-        from envs.gym.dm_tasks import load
+        from maptidal.envs.gym.dm_tasks import load
 
         return load("go_to_pose", seed=3, episode_s=2.0)
 
@@ -386,13 +382,13 @@ class TankInspectionDmEnvTest(test_utils.EnvironmentTestMixin, absltest.TestCase
     """The same on TankInspection."""
 
     def make_object_under_test(self):
-        from envs.gym.dm_tasks import load
+        from maptidal.envs.gym.dm_tasks import load
 
         return load("tank_inspection", seed=3, episode_s=2.0)
 
 
 def test_the_dm_control_task_shares_the_gymnasium_tasks_world_and_rewards():
-    from envs.gym.dm_tasks import load
+    from maptidal.envs.gym.dm_tasks import load
 
     env = load("go_to_pose", seed=5)
     task_env = env.task.task_env
@@ -452,14 +448,14 @@ def test_the_team_can_pick_tasks_that_go_to_pose_flies():
     ],
 )
 def test_bad_options_are_refused_before_anything_is_built(options, message):
-    from envs.gym.core import EnvOptions
+    from maptidal.envs.gym.core import EnvOptions
 
     with pytest.raises(ValueError, match=message):
         EnvOptions.checked(options)
 
 
 def test_a_step_before_reset_or_after_the_episode_ended_raises():
-    from envs.gym.station_keeping import StationKeepingEnv
+    from maptidal.envs.gym.station_keeping import StationKeepingEnv
 
     env = StationKeepingEnv()  # unwrapped: Gymnasium's OrderEnforcing is not there to catch it
     try:

@@ -17,16 +17,21 @@ import time
 
 import numpy as np
 import pytest
+from maptidal.controllers.convention import CommandError
+from maptidal.controllers.mavlink_bridge import BridgeError, BridgeParams, MavlinkBridge, load_signing_key
+from maptidal.controllers.mavlink_wire import (
+    ARDUSUB_MODES,
+    decode_manual_control,
+    decode_rc_channel,
+    encode_pilot,
+)
+from maptidal.controllers.mixing import MixerParams, mix
+from maptidal.controllers.thrusters import command_to_pwm
+from maptidal.envs.ardupilot_json import JsonBackend
+from maptidal.envs.mavlink_vehicle import SimVehicle, SimVehicleParams, VehicleEndpointError
+from maptidal.envs.simulation import Simulation
 from pymavlink import mavutil
 
-from controllers.convention import CommandError
-from controllers.mavlink_bridge import BridgeError, BridgeParams, MavlinkBridge, load_signing_key
-from controllers.mavlink_wire import ARDUSUB_MODES, decode_manual_control, decode_rc_channel, encode_pilot
-from controllers.mixing import MixerParams, mix
-from controllers.thrusters import command_to_pwm
-from envs.ardupilot_json import JsonBackend
-from envs.mavlink_vehicle import SimVehicle, SimVehicleParams, VehicleEndpointError
-from envs.simulation import Simulation
 from maptidal.cli import main
 
 os.environ.setdefault("MAVLINK20", "1")
@@ -640,7 +645,7 @@ def test_the_bridge_connects_over_tcp_too():
 def test_the_bridge_takes_the_best_fresh_depth_and_never_freezes_on_one_source():
     """LOCAL_POSITION_NED (the autopilot's estimate) beats VFR_HUD beats SCALED_PRESSURE2 (the raw
     sensor); a source that stops is passed over for the next one that is still coming."""
-    from controllers.mavlink_bridge import DEPTH_FRESH_S, VehicleTelemetry
+    from maptidal.controllers.mavlink_bridge import DEPTH_FRESH_S, VehicleTelemetry
 
     t = VehicleTelemetry()
     assert t.depth_m is None and t.depth_age_s() is None
@@ -664,7 +669,7 @@ def test_the_bridge_warns_once_when_the_depth_telemetry_stops(caplog):
     with Served(speedup=2.0) as served, MavlinkBridge(served.url) as bridge:
         assert wait_until(lambda: bridge.telemetry.depth_m is not None)
         assert bridge.telemetry.depth_source == "LOCAL_POSITION_NED"  # the vehicle's own estimate
-        with caplog.at_level("WARNING", logger="controllers.mavlink_bridge"):
+        with caplog.at_level("WARNING", logger="maptidal.controllers.mavlink_bridge"):
             for name in ("LOCAL_POSITION_NED", "VFR_HUD", "SCALED_PRESSURE2"):  # the depth stops coming
                 served.vehicle._rates[name] = 0.0
             assert wait_until(lambda: bridge.depth_stale, 10)
@@ -677,7 +682,7 @@ def test_set_mode_asks_again_while_the_vehicle_refuses_within_its_bound(monkeypa
     """ArduSub refuses ALT_HOLD ("need alt estimate") for its first seconds: the bridge asks again once a
     second within retry_for_s, and raises the refusal past it."""
     bridge = MavlinkBridge("udpout:127.0.0.1:9")
-    monkeypatch.setattr("controllers.mavlink_bridge.time.sleep", lambda _s: None)
+    monkeypatch.setattr("maptidal.controllers.mavlink_bridge.time.sleep", lambda _s: None)
     calls = []
 
     def refuse_twice(command, values, timeout_s):

@@ -476,7 +476,7 @@ def test_after_a_failure_the_survivor_finishes_every_task_and_the_mission_ends(t
 
 
 def test_a_robot_keeps_clear_of_a_lower_indexed_teammate_it_has_heard_from(tmp_path):
-    from controllers.trajectory import PoseReference
+    from maptidal.controllers.trajectory import PoseReference
 
     scenario, _ = load_mission(None)
     mission = Mission(scenario, MissionParams(duration_s=1.0, clearance_m=1.0, peer_fresh_s=30.0), tmp_path)
@@ -519,7 +519,7 @@ def test_go_to_pose_streams_its_commands_at_the_command_rate(tmp_path):
 
 
 def test_a_robot_keeps_clear_of_two_teammates_at_once(tmp_path):
-    from controllers.trajectory import PoseReference
+    from maptidal.controllers.trajectory import PoseReference
 
     scenario = _third_robot(load_mission(None)[0])
     mission = Mission(scenario, MissionParams(duration_s=1.0, clearance_m=1.0), tmp_path)
@@ -569,7 +569,7 @@ def test_a_mission_with_no_task_done_still_writes_every_plot_and_a_whole_report(
 def test_a_mission_the_physics_fails_in_raises_and_leaves_no_worker_nor_thread(tmp_path):
     import threading
 
-    from envs.simulation import SimulationError
+    from maptidal.envs.simulation import SimulationError
 
     scenario, _ = load_mission(None)
     mission = Mission(scenario, MissionParams(duration_s=20.0), tmp_path)

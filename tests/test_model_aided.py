@@ -1,5 +1,6 @@
 """Dead reckoning without a DVL (issue [mission]): the velocity from the thrust commands through the
-vehicle's motion model (controllers.estimation.MotionModel), checked against Fossen's closed forms and
+vehicle's motion model (maptidal.controllers.estimation.MotionModel), checked against Fossen's closed forms
+and
 against the simulator's truth; and the visual odometry's gate against the model-aided step."""
 
 from __future__ import annotations
@@ -8,11 +9,11 @@ import math
 
 import numpy as np
 import pytest
+from maptidal.controllers.estimation import DeadReckoning, EstimatorParams, MotionModel
+from maptidal.envs.scenario import RobotSpec, Scenario
+from maptidal.envs.simulation import Simulation
+from maptidal.envs.vehicle import load_vehicle
 
-from controllers.estimation import DeadReckoning, EstimatorParams, MotionModel
-from envs.scenario import RobotSpec, Scenario
-from envs.simulation import Simulation
-from envs.vehicle import load_vehicle
 from maptidal.perception.odometry import OdometryParams, VisualOdometry
 from maptidal.perception.recording import CameraPose
 from maptidal.tank import TankModel, open_water_config

@@ -3,27 +3,47 @@ package, and `maptidal compare` and `maptidal sim` work from it in a fresh virtu
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import sysconfig
 import tomllib
+import zipfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+# what a checkout holds beside the source that a wheel must not see
+BUILD_LEFTOVERS = (
+    ".git",
+    ".venv",
+    "build",
+    "runs",
+    "_build",
+    "*.egg-info",
+    "__pycache__",
+    ".*_cache",
+    ".gl",
+    ".whl",
+)
 
 
 def test_every_package_of_the_source_tree_is_in_the_wheel_list():
     listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    installed_as = {"maptidal": "maptidal", "envs": "maptidal.envs", "controllers": "maptidal.controllers"}
     found = {
-        ".".join(init.parent.relative_to(ROOT).parts)
-        for top in ("maptidal", "envs", "controllers")
+        ".".join((installed_as[top], *init.parent.relative_to(ROOT / top).parts))
+        for top in installed_as
         for init in (ROOT / top).rglob("__init__.py")
     }
     assert found <= listed, f"add {sorted(found - listed)} to [tool.setuptools] packages"
+    assert all(name.split(".")[0] == "maptidal" for name in listed), "one namespace: maptidal"
 
 
 def test_wheel_installed_in_a_fresh_venv_runs_compare_and_sim(tmp_path):
     wheels = tmp_path / "wheels"
+    # built from a copy: setuptools packs whatever an earlier build left in the tree's build/lib
+    source = tmp_path / "source"
+    shutil.copytree(ROOT, source, ignore=shutil.ignore_patterns(*BUILD_LEFTOVERS))
     subprocess.run(
         [
             sys.executable,
@@ -35,12 +55,18 @@ def test_wheel_installed_in_a_fresh_venv_runs_compare_and_sim(tmp_path):
             "--no-build-isolation",
             "-w",
             str(wheels),
-            str(ROOT),
+            str(source),
         ],
         check=True,
         capture_output=True,
     )
     (wheel,) = wheels.glob("maptidal-*.whl")
+    with zipfile.ZipFile(wheel) as archive:
+        names = set(archive.namelist())
+    # one namespace: no generic top-level packages such as envs or controllers
+    top_level = {name.split("/")[0] for name in names if ".dist-info/" not in name}
+    assert top_level == {"maptidal"}, top_level
+    assert {"maptidal/envs/simulation.py", "maptidal/envs/_hydro.c", "maptidal/controllers/pose.py"} <= names
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
     python = venv / "bin" / "python"
@@ -101,7 +127,7 @@ def test_wheel_installed_in_a_fresh_venv_runs_compare_and_sim(tmp_path):
 def test_the_native_library_is_never_built_inside_an_installed_package(monkeypatch, tmp_path):
     from pathlib import Path
 
-    from envs.hydrodynamics import build_dirs
+    from maptidal.envs.hydrodynamics import build_dirs
 
     monkeypatch.delenv("MAPTIDAL_CACHE", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))

@@ -62,7 +62,9 @@ def test_readme_commands_run_verbatim(tmp_path, monkeypatch, capsys):
 
 def test_readme_controller_example_runs_to_capture():
     text = (ROOT / "README.md").read_text()
-    (block,) = [b for b in re.findall(r"```python\n(.*?)```", text, flags=re.S) if "from controllers" in b]
+    (block,) = [
+        b for b in re.findall(r"```python\n(.*?)```", text, flags=re.S) if "from maptidal.controllers" in b
+    ]
     scope: dict = {}
     exec(compile(block, "README.md", "exec"), scope)
     assert scope["status"] == "capture"

@@ -17,14 +17,13 @@ import time
 
 import numpy as np
 import pytest
+from maptidal.controllers.convention import pilot_command
+from maptidal.controllers.mavlink_bridge import BridgeParams, MavlinkBridge
+from maptidal.controllers.mixing import MixerParams, mix
+from maptidal.controllers.thrusters import command_to_pwm
+from maptidal.envs.ardupilot_json import JsonBackend
+from maptidal.envs.simulation import Simulation
 from test_mavlink import free_port, wait_until
-
-from controllers.convention import pilot_command
-from controllers.mavlink_bridge import BridgeParams, MavlinkBridge
-from controllers.mixing import MixerParams, mix
-from controllers.thrusters import command_to_pwm
-from envs.ardupilot_json import JsonBackend
-from envs.simulation import Simulation
 
 SITL = os.environ.get("ARDUSUB_SITL")
 pytestmark = [

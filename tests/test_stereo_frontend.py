@@ -105,7 +105,7 @@ def test_triangulation_follows_the_pinhole_and_the_depth_band():
 
 @pytest.mark.parametrize("detector", ["orb", "gftt", "fast", "sift"])
 def test_depth_on_rendered_frames_matches_the_renderers(detector):
-    from envs.simulation import Simulation
+    from maptidal.envs.simulation import Simulation
 
     sim = Simulation()
     sim.reset(seed=0)

@@ -1,17 +1,24 @@
-"""The T200 curve and ArduSub's command-to-PWM mapping (controllers.thrusters), against references
+"""The T200 curve and ArduSub's command-to-PWM mapping (maptidal.controllers.thrusters), against references
 typed in here from public sources, and the thrust linearisation of the feedback controllers."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from maptidal.controllers.mixing import MixerParams, allocation_matrix, mix
+from maptidal.controllers.thrusters import (
+    T200_12V,
+    T200_16V,
+    PwmRange,
+    command_to_pwm,
+    linear_curve,
+    pwm_to_command,
+)
+from maptidal.envs.hydrodynamics import body_wrench
+from maptidal.envs.scenario import RobotSpec, Scenario
+from maptidal.envs.simulation import Simulation
+from maptidal.envs.vehicle import ThrusterParams, VehicleConfigError, load_vehicle
 
-from controllers.mixing import MixerParams, allocation_matrix, mix
-from controllers.thrusters import T200_12V, T200_16V, PwmRange, command_to_pwm, linear_curve, pwm_to_command
-from envs.hydrodynamics import body_wrench
-from envs.scenario import RobotSpec, Scenario
-from envs.simulation import Simulation
-from envs.vehicle import ThrusterParams, VehicleConfigError, load_vehicle
 from maptidal.tank import TankModel, open_water_config
 
 KGF = 9.80665

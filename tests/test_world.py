@@ -10,15 +10,15 @@ import cv2
 import mujoco
 import numpy as np
 import pytest
+from maptidal.envs import rendering
+from maptidal.envs import water as water_module
+from maptidal.envs.rendering import renders_on_gpu
+from maptidal.envs.scenario import RobotSpec, Scenario, ScenarioError, load_scenario, scenario_from_dict
+from maptidal.envs.sensors import SensorNoise, heading_from_field
+from maptidal.envs.simulation import Simulation
+from maptidal.envs.vehicle import load_vehicle
+from maptidal.envs.water import WaterModel, WaterParams
 
-from envs import rendering
-from envs import water as water_module
-from envs.rendering import renders_on_gpu
-from envs.scenario import RobotSpec, Scenario, ScenarioError, load_scenario, scenario_from_dict
-from envs.sensors import SensorNoise, heading_from_field
-from envs.simulation import Simulation
-from envs.vehicle import load_vehicle
-from envs.water import WaterModel, WaterParams
 from maptidal.cli import main
 from maptidal.tank import LadderConfig, TankConfig, TankModel, WindowConfig
 
@@ -400,7 +400,7 @@ def test_a_stereo_snapshot_draws_its_moment_after_the_physics_moves_on(backend):
 
 @pytest.mark.parametrize("shader_runs", [True, False])
 def test_prefer_gl_takes_the_shader_where_it_runs_and_the_cpu_model_elsewhere(monkeypatch, shader_runs):
-    import envs.simulation as simulation_module
+    import maptidal.envs.simulation as simulation_module
 
     monkeypatch.setattr(simulation_module, "gl_water_available", lambda *args: shader_runs)
     monkeypatch.setattr(simulation_module, "renders_on_gpu", lambda *args: False)  # a CPU rasteriser

@@ -11,10 +11,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from maptidal.envs.export import export_world
+from maptidal.envs.scenario import inside_tank, load_scenario
+from maptidal.envs.world import build_tank_spec, quat_from_axes
 
-from envs.export import export_world
-from envs.scenario import inside_tank, load_scenario
-from envs.world import build_tank_spec, quat_from_axes
 from maptidal.tank import LadderConfig, TankConfig, TankModel, WindowConfig
 
 SURFACES_AND_LADDER = np.array([1, 0, 0, 0, 0, 0], np.uint8)  # geom group 0 only
@@ -131,8 +131,8 @@ def test_left_handed_frames_are_refused():
 
 def test_every_frame_the_builder_makes_is_right_handed(monkeypatch):
     # every geom, site, camera and attachment frame of a two-robot world goes through quat_from_axes
-    from envs import world
-    from envs.simulation import Simulation
+    from maptidal.envs import world
+    from maptidal.envs.simulation import Simulation
 
     frames = []
 

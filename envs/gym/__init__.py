@@ -1,27 +1,31 @@
 """maptidal's Gymnasium environments, registered under the ``MapTidal/`` namespace on ``import envs``:
 
-- ``MapTidal/GoToPose-v0`` (:class:`envs.gym.go_to_pose.GoToPoseEnv`): reach an inspection pose and hold it;
-- ``MapTidal/StationKeeping-v0`` (:class:`envs.gym.station_keeping.StationKeepingEnv`): hold a pose in a
+- ``MapTidal/GoToPose-v0`` (:class:`maptidal.envs.gym.go_to_pose.GoToPoseEnv`): reach an inspection pose and
+  hold it;
+- ``MapTidal/StationKeeping-v0`` (:class:`maptidal.envs.gym.station_keeping.StationKeepingEnv`): hold a pose
+  in a
   current and turbulence that vary per episode;
-- ``MapTidal/TankInspection-v0`` (:class:`envs.gym.tank_inspection.TankInspectionEnv`): see as much of
+- ``MapTidal/TankInspection-v0`` (:class:`maptidal.envs.gym.tank_inspection.TankInspectionEnv`): see as much
+  of
   the tank's evaluated walls as possible (reward: newly seen voxels, with occlusion);
-- ``MapTidal/TeamInspection-v0`` (:class:`envs.gym.team_inspection.TeamInspectionEnv`): N robots share
-  that reward, Dict spaces keyed by robot; :func:`envs.gym.team_inspection.parallel_env` is its
+- ``MapTidal/TeamInspection-v0`` (:class:`maptidal.envs.gym.team_inspection.TeamInspectionEnv`): N robots
+  share
+  that reward, Dict spaces keyed by robot; :func:`maptidal.envs.gym.team_inspection.parallel_env` is its
   PettingZoo ``ParallelEnv``.
 
     import gymnasium, envs
     env = gymnasium.make("MapTidal/GoToPose-v0")
 
-The same tasks as dm_control environments: :func:`envs.gym.dm_tasks.load`.
+The same tasks as dm_control environments: :func:`maptidal.envs.gym.dm_tasks.load`.
 """
 
 from __future__ import annotations
 
 ENVIRONMENTS = {
-    "MapTidal/GoToPose-v0": "envs.gym.go_to_pose:GoToPoseEnv",
-    "MapTidal/StationKeeping-v0": "envs.gym.station_keeping:StationKeepingEnv",
-    "MapTidal/TankInspection-v0": "envs.gym.tank_inspection:TankInspectionEnv",
-    "MapTidal/TeamInspection-v0": "envs.gym.team_inspection:TeamInspectionEnv",
+    "MapTidal/GoToPose-v0": "maptidal.envs.gym.go_to_pose:GoToPoseEnv",
+    "MapTidal/StationKeeping-v0": "maptidal.envs.gym.station_keeping:StationKeepingEnv",
+    "MapTidal/TankInspection-v0": "maptidal.envs.gym.tank_inspection:TankInspectionEnv",
+    "MapTidal/TeamInspection-v0": "maptidal.envs.gym.team_inspection:TeamInspectionEnv",
 }
 
 

@@ -3,10 +3,11 @@ users (Acme, dm_env).
 
 Each environment is a :class:`MapTidalPhysics`, a ``dm_control.mujoco.Physics`` around the *same*
 ``MjData`` (and so the same compiled model and hydrodynamics callback) as the Gymnasium task's
-:class:`envs.simulation.Simulation`, and a :class:`GymTask` that asks the Gymnasium task for its start
+:class:`maptidal.envs.simulation.Simulation`, and a :class:`GymTask` that asks the Gymnasium task for its
+start
 state, observations, reward and termination. No second world is built.
 
-    from envs.gym.dm_tasks import load
+    from maptidal.envs.gym.dm_tasks import load
     env = load("go_to_pose")                 # or "station_keeping", "tank_inspection"
     timestep = env.reset()
     timestep = env.step(numpy.zeros(6))
@@ -26,11 +27,10 @@ from dm_control.mujoco import wrapper
 from dm_control.rl import control
 from dm_control.suite import base
 from dm_env import specs
-
-from envs.gym.core import MapTidalEnv
-from envs.gym.go_to_pose import GoToPoseEnv
-from envs.gym.station_keeping import StationKeepingEnv
-from envs.gym.tank_inspection import TankInspectionEnv
+from maptidal.envs.gym.core import MapTidalEnv
+from maptidal.envs.gym.go_to_pose import GoToPoseEnv
+from maptidal.envs.gym.station_keeping import StationKeepingEnv
+from maptidal.envs.gym.tank_inspection import TankInspectionEnv
 
 TASKS: dict[str, type[MapTidalEnv]] = {
     "go_to_pose": GoToPoseEnv,
@@ -121,7 +121,7 @@ def load(task: str, seed: int | None = None, **options) -> control.Environment:
 def view(task: str, policy=None, seed: int | None = None, **options) -> None:
     """Show ``task`` in ``dm_control.viewer`` (needs a display), flown by ``policy`` (a function of the
     ``TimeStep`` that returns a 6-vector; none: the viewer's zero action)."""
-    from envs.gym.core import _has_display
+    from maptidal.envs.gym.core import _has_display
 
     if not _has_display():
         raise ValueError("dm_control.viewer needs a display (DISPLAY or WAYLAND_DISPLAY is unset)")

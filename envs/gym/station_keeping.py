@@ -5,8 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from envs.gym.core import PoseTargetEnv
+from maptidal.envs.gym.core import PoseTargetEnv
 
 
 class StationKeepingEnv(PoseTargetEnv):

@@ -7,8 +7,8 @@ import math
 import mujoco
 import numpy as np
 from gymnasium import spaces
+from maptidal.envs.gym.core import SAFE_BOX, MapTidalEnv
 
-from envs.gym.core import SAFE_BOX, MapTidalEnv
 from maptidal.coverage import CoverageModel, CoverageParams, SeenVoxels
 
 SECTORS = 8  # coverage summary: the evaluated walls in eight sectors around the tank's centre line
@@ -17,7 +17,7 @@ REWARD_PER_VOXEL = 0.01
 
 def camera_viewpoint(truth: dict, camera_position) -> np.ndarray:
     """The viewpoint row (camera position, viewing direction) of a robot from its true pose
-    (:meth:`envs.simulation.Simulation.ground_truth`) and its camera's body position."""
+    (:meth:`maptidal.envs.simulation.Simulation.ground_truth`) and its camera's body position."""
     matrix = np.zeros(9)
     mujoco.mju_quat2Mat(matrix, np.asarray(truth["quaternion"], float))
     rotation = matrix.reshape(3, 3)

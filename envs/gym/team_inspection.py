@@ -10,14 +10,14 @@ import gymnasium
 import mujoco
 import numpy as np
 from gymnasium import spaces
+from maptidal.controllers.pose import PoseController
+from maptidal.controllers.task import TaskExecutor, TaskParams
+from maptidal.envs.gym.core import SAFE_BOX, EnvOptions, EpisodeState
+from maptidal.envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
+from maptidal.envs.scenario import Scenario, load_scenario, with_frame
+from maptidal.envs.simulation import Simulation
+from maptidal.envs.views import third_person_frame
 
-from controllers.pose import PoseController
-from controllers.task import TaskExecutor, TaskParams
-from envs.gym.core import SAFE_BOX, EnvOptions, EpisodeState
-from envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
-from envs.scenario import Scenario, load_scenario, with_frame
-from envs.simulation import Simulation
-from envs.views import third_person_frame
 from maptidal.baselines import voronoi_viewpoints
 
 MAX_ROBOTS = 4
@@ -35,7 +35,7 @@ class TeamInspectionEnv(gymnasium.Env):
 
     ``action="tasks"``: each robot's entry is ``Discrete(N)``, the inspection task to fly next (the
     Voronoi baseline's 20 viewpoints, :func:`task_poses`). One step flies every robot to its task with
-    ``controllers.task.TaskExecutor`` (go-to-pose on its own estimate, hold 0.1 m and 5 deg for a 1 s
+    ``maptidal.controllers.task.TaskExecutor`` (go-to-pose on its own estimate, hold 0.1 m and 5 deg for a 1 s
     dwell; ``task_timeout_s``, 30 s, if it cannot), and the observation adds ``tasks`` (the N poses x,
     y, z, yaw) and ``tasks_done`` (1 for each task captured). The reward is then 0.01 per wall voxel
     newly seen from where the robots end, minus 0.01 per second spent; the episode ends when every

@@ -174,7 +174,7 @@ def load_waypoints(path: str | Path) -> list[dict]:
 
 def run_mavlink(args: argparse.Namespace) -> int:
     """Handler of ``maptidal mavlink``."""
-    from controllers.mavlink_bridge import (
+    from maptidal.controllers.mavlink_bridge import (
         BridgeError,
         BridgeParams,
         MavlinkBridge,
@@ -234,9 +234,9 @@ def _status(bridge, listen_s: float = 2.0) -> dict:
 
 
 def _fly(bridge, args, waypoints) -> dict:
-    from controllers.pose import DepthHold, HeadingHold, PoseController
-    from controllers.task import TaskExecutor, TaskParams
-    from envs.vehicle import load_vehicle
+    from maptidal.controllers.pose import DepthHold, HeadingHold, PoseController
+    from maptidal.controllers.task import TaskExecutor, TaskParams
+    from maptidal.envs.vehicle import load_vehicle
 
     model = load_vehicle(args.frame).controller_model()
     mode = "stabilize" if args.mode == "depth-hold" or waypoints else args.mode
@@ -300,7 +300,7 @@ def _fly(bridge, args, waypoints) -> dict:
 
 
 def _check_link(bridge) -> None:
-    from controllers.mavlink_bridge import BridgeError
+    from maptidal.controllers.mavlink_bridge import BridgeError
 
     if bridge.link_lost:
         raise BridgeError("lost the vehicle's heartbeat: sent neutral and stopped")
@@ -314,9 +314,9 @@ def _say(line: str) -> None:
 
 def run_sim_vehicle(args: argparse.Namespace) -> int:
     """Handler of ``maptidal sim-vehicle``."""
-    from controllers.mavlink_bridge import load_signing_key
-    from envs.scenario import load_scenario
-    from envs.simulation import Simulation
+    from maptidal.controllers.mavlink_bridge import load_signing_key
+    from maptidal.envs.scenario import load_scenario
+    from maptidal.envs.simulation import Simulation
 
     if args.idle_timeout < 0:
         raise ValueError(f"--idle-timeout must be >= 0, got {args.idle_timeout}")
@@ -326,7 +326,7 @@ def run_sim_vehicle(args: argparse.Namespace) -> int:
     if args.robot is not None and args.robot not in sim.robots:
         raise ValueError(f"--robot {args.robot!r} is not in the scenario; robots: {', '.join(sim.robots)}")
     if args.ardupilot_json:
-        from envs.ardupilot_json import JsonBackend, JsonBackendError
+        from maptidal.envs.ardupilot_json import JsonBackend, JsonBackendError
 
         try:
             server = JsonBackend(sim, args.robot, port=args.port, on_event=_say).open()
@@ -334,7 +334,7 @@ def run_sim_vehicle(args: argparse.Namespace) -> int:
             raise RunError(str(error)) from None
         print(f"ArduPilot JSON physics on UDP port {args.port} (robot {server.robot})", file=sys.stderr)
     else:
-        from envs.mavlink_vehicle import SimVehicle, SimVehicleParams, VehicleEndpointError
+        from maptidal.envs.mavlink_vehicle import SimVehicle, SimVehicleParams, VehicleEndpointError
 
         key = load_signing_key(args.signing_key_file)
         server = SimVehicle(sim, args.robot, args.connect, SimVehicleParams(speedup=args.speedup), key)

@@ -96,7 +96,7 @@ class _ContactLog:
         self.entries: dict[str, dict[str, dict]] = {robot: {} for robot in robots}
 
     def record(self, contacts, time_s: float) -> None:
-        """Add this control step's contacts (:meth:`envs.simulation.Simulation.contacts`)."""
+        """Add this control step's contacts (:meth:`maptidal.envs.simulation.Simulation.contacts`)."""
         for contact in contacts:
             entry = self.entries[contact.robot].setdefault(
                 contact.other, {"with": contact.other, "first_s": time_s, "max_force_n": 0.0, "steps": 0}
@@ -116,9 +116,9 @@ def run_sim(args: argparse.Namespace) -> int:
     """Handler of ``maptidal sim``."""
     import cv2
 
-    from controllers.convention import parse_command
-    from envs.scenario import load_scenario, with_frame
-    from envs.simulation import Simulation, SimulationError
+    from maptidal.controllers.convention import parse_command
+    from maptidal.envs.scenario import load_scenario, with_frame
+    from maptidal.envs.simulation import Simulation, SimulationError
 
     command = parse_command(args.pilot_command)
     scenario = load_scenario(args.scenario)
@@ -197,8 +197,8 @@ def run_sim(args: argparse.Namespace) -> int:
 
 def run_export(args: argparse.Namespace) -> int:
     """Handler of ``maptidal export-mjcf``."""
-    from envs.export import export_world
-    from envs.scenario import load_scenario, with_frame
+    from maptidal.envs.export import export_world
+    from maptidal.envs.scenario import load_scenario, with_frame
 
     scenario = load_scenario(args.scenario)
     if args.frame:

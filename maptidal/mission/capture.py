@@ -27,13 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.estimation import rotation_from_rpy
-from controllers.pose import PoseController
-from controllers.trajectory import Hold, MotionLimits, PoseTrajectory, Route
-from envs.scenario import Scenario, load_scenario
-from envs.simulation import Simulation
-from envs.world import camera_offsets
 from maptidal.camera import StereoCameraParams
+from maptidal.controllers.estimation import rotation_from_rpy
+from maptidal.controllers.pose import PoseController
+from maptidal.controllers.trajectory import Hold, MotionLimits, PoseTrajectory, Route
+from maptidal.envs.scenario import Scenario, load_scenario
+from maptidal.envs.simulation import Simulation
+from maptidal.envs.world import camera_offsets
 from maptidal.files import save_mesh
 from maptidal.keyframes import ExplorationParams, PaperCaptureParams
 from maptidal.perception.recording import (
@@ -122,7 +122,8 @@ def capture(
     camera: StereoCameraParams | None = None,
 ) -> Recording:
     """Fly ``params.path`` in ``scenario`` and write the recording to ``out_dir``; returns it loaded.
-    ``water_backend`` is :class:`envs.simulation.Simulation`'s (``"cpu"`` gives the same pixels on every
+    ``water_backend`` is :class:`maptidal.envs.simulation.Simulation`'s (``"cpu"`` gives the same pixels on
+    every
     machine); ``camera`` the stereo pair (default: the OAK-D at 640x400; the mission draws 320x200)."""
     params = params or CaptureParams()
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
@@ -165,7 +166,7 @@ def _fly(sim: Simulation, out_dir: Path, params: CaptureParams, seed: int, robot
         "robot": robot,
         "sensors": list(spec.sensors),
         # the simulator's dead reckoning: without a DVL, its horizontal velocity comes from the thrust
-        # commands through the vehicle's motion model (controllers.estimation.MotionModel)
+        # commands through the vehicle's motion model (maptidal.controllers.estimation.MotionModel)
         "dead_reckoning": "model-aided",
         "path": params.path,
         "seed": seed,

@@ -1,4 +1,4 @@
-"""A mission file: a scenario TOML (``envs.scenario``) with an optional ``[mission]`` table:
+"""A mission file: a scenario TOML (``maptidal.envs.scenario``) with an optional ``[mission]`` table:
 
     [mission]
     duration_s = 180
@@ -38,7 +38,13 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from envs.scenario import SCENARIO_DIR, Scenario, ScenarioError, read_scenario_file, scenario_from_dict
+from maptidal.envs.scenario import (
+    SCENARIO_DIR,
+    Scenario,
+    ScenarioError,
+    read_scenario_file,
+    scenario_from_dict,
+)
 from maptidal.mission.run import MissionEvent, MissionParams, check_events
 
 DEFAULT_MISSION = SCENARIO_DIR / "mission.toml"

@@ -44,22 +44,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controllers.estimation import rotation_from_rpy
-from controllers.flight_modes import lean_stick
-from controllers.pose import PoseController
-from controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, Route
-from envs.rendering import check_render_samples, describe_renderer
-from envs.scenario import Scenario, check_current, inside_tank, load_scenario
-from envs.simulation import Simulation, check_water_backend
-from envs.world import camera_offsets
 from maptidal.allocation.agent import AgentParams
 from maptidal.allocation.auction import AuctionEvent, AuctionSimulation
 from maptidal.allocation.messages import DONE
 from maptidal.allocation.scoring import AuctionParams, RobotProfile
 from maptidal.camera import StereoCameraParams
 from maptidal.comms.channel import ChannelParams, Outage
+from maptidal.controllers.estimation import rotation_from_rpy
+from maptidal.controllers.flight_modes import lean_stick
+from maptidal.controllers.pose import PoseController
+from maptidal.controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, Route
 from maptidal.coverage import CoverageModel, CoverageParams, SeenVoxels
 from maptidal.discovery import DiscoveryParams
+from maptidal.envs.rendering import check_render_samples, describe_renderer
+from maptidal.envs.scenario import Scenario, check_current, inside_tank, load_scenario
+from maptidal.envs.simulation import Simulation, check_water_backend
+from maptidal.envs.world import camera_offsets
 from maptidal.free_space import free_space_mask
 from maptidal.mission.capture import camera_pose_from_body
 from maptidal.mission.outputs import MissionWriter
@@ -152,7 +152,8 @@ class MissionParams:
     # own process, on its drawing thread: 1.1 to 1.3 times slower on 2 cores, with the same results)
     perception_process: bool = True
     pose_source: str = "vo"
-    # how far off the robots' estimators' motion models are (controllers.estimation.MotionModel.perturbed;
+    # how far off the robots' estimators' motion models are
+    # (maptidal.controllers.estimation.MotionModel.perturbed;
     # a robot without a DVL dead-reckons on one): 0, the simulator's own coefficients
     motion_model_error: float = 0.0
     # a robot without a DVL relocalises against its own map (maptidal.perception.relocalisation); False

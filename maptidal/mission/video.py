@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from envs.views import overview_camera, third_person_frame
+from maptidal.envs.views import overview_camera, third_person_frame
 
 if TYPE_CHECKING:  # run imports this module
     from maptidal.mission.run import Mission, MissionParams

@@ -12,7 +12,7 @@
   used alone.
 - **Without a DVL** (``has_dvl=False``) the dead reckoning's horizontal motion is either model-aided
   (``model_aided=True``: the velocity from the thrust commands through the vehicle's motion model,
-  :class:`controllers.estimation.MotionModel`, as the simulator's estimator does), and then weighs as
+  :class:`maptidal.controllers.estimation.MotionModel`, as the simulator's estimator does), and then weighs as
   much as vision (``visual_weight_model_aided``), or there is none at all (``model_aided=False``, a
   vehicle whose autopilot has no horizontal estimate without a DVL), and vision carries it wholly.
 - **A gate.** Where the dead reckoning moves horizontally, a visual step that disagrees with it by more

@@ -16,7 +16,8 @@ import time
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from envs.simulation import Simulation
+from maptidal.envs.simulation import Simulation
+
 from maptidal.frame_discovery import discover_on_recording
 from maptidal.mission.capture import CaptureParams, capture, place_camera
 from maptidal.perception.frontend import FrontEndParams

@@ -11,9 +11,8 @@ import os
 import time
 
 import gymnasium
+import maptidal.envs  # noqa: F401
 import numpy as np
-
-import envs  # noqa: F401
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 

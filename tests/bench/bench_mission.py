@@ -23,7 +23,8 @@ import numpy as np
 
 def floor_factor(scenario, params, duration_s: float) -> float:
     """Real-time factor of bare stepping and rendering (the mission's floor)."""
-    from envs.simulation import Simulation
+    from maptidal.envs.simulation import Simulation
+
     from maptidal.camera import StereoCameraParams
 
     width, height = params.image_size

@@ -28,7 +28,7 @@ import numpy as np
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from envs.simulation import Simulation
+from maptidal.envs.simulation import Simulation
 
 
 @dataclass(frozen=True)
@@ -67,7 +67,7 @@ def response(step: Step, times: np.ndarray, states: np.ndarray) -> dict[str, flo
 
 
 def fly_ours(step: Step, seed: int = 0) -> dict[str, float]:
-    """The step through :mod:`controllers.flight_modes` in the simulator."""
+    """The step through :mod:`maptidal.controllers.flight_modes` in the simulator."""
     sim = Simulation(flight_mode=step.mode)
     sim.reset(seed=seed)
     robot = sim.robots[0]
@@ -84,8 +84,8 @@ def fly_ours(step: Step, seed: int = 0) -> dict[str, float]:
 
 def fly_sitl(step: Step, binary: str, seed: int = 0) -> dict[str, float]:
     """The step through ArduSub SITL on our physics, sampled from the simulation it steps."""
-    from controllers.mavlink_bridge import BridgeParams, MavlinkBridge
-    from envs.ardupilot_json import JsonBackend
+    from maptidal.controllers.mavlink_bridge import BridgeParams, MavlinkBridge
+    from maptidal.envs.ardupilot_json import JsonBackend
 
     sim = Simulation()
     sim.reset(seed=seed)

@@ -1,5 +1,5 @@
 """An independent 6-DOF Fossen model of a BlueROV2, integrated with scipy's solve_ivp: the test oracle
-for envs.hydrodynamics.
+for maptidal.envs.hydrodynamics.
 
 Written from the book, in matrix form, with no MuJoCo and none of the simulator's code: T. I. Fossen,
 "Handbook of Marine Craft Hydrodynamics and Motion Control", Wiley 2011. In the relative velocity
@@ -21,7 +21,7 @@ equations of motion read
 
 S(a) is the skew-symmetric matrix with S(a) b = a x b. The parameters are read from
 assets/bluerov2/bluerov2.toml here, with tomllib, so that this oracle shares no parameter handling with
-envs.vehicle either.
+maptidal.envs.vehicle either.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ VEHICLE_TOML = Path(__file__).resolve().parents[2] / "assets" / "bluerov2" / "bl
 GRAVITY = 9.81
 
 
-# The T200 curve, transcribed here from its public sources rather than from controllers.thrusters:
+# The T200 curve, transcribed here from its public sources rather than from maptidal.controllers.thrusters:
 # - a least-squares quadratic of Blue Robotics' 12 V sheet ("EMPIRICAL FIT TO PUBLISHED T200 12V
 #   Data"): thrust (N) = a pwm^2 + b pwm + c, forward on 1540-1900 us, reverse on 1100-1460 us;
 # - deadband and full thrust at 16 V as read off Blue Robotics' 2019 workbook (duburi_sim's

@@ -31,7 +31,7 @@ CAPTURE = {"path": "paper", "frame_rate_hz": 0.5, "max_frames": GOLDEN_FRAMES}  
 
 def golden_scenario():
     """The default scenario with the camera noise off."""
-    from envs.scenario import load_scenario
+    from maptidal.envs.scenario import load_scenario
 
     scenario = load_scenario()
     return dataclasses.replace(scenario, water=dataclasses.replace(scenario.water, noise_sigma=0.0))
