@@ -43,13 +43,11 @@ Euler angle error is used, which is close at the leans pilots fly).
 
 **Thrust linearisation.** ArduSub sends its loops' outputs to the thrusters linearly in PWM
 (``AP_Motors6DOF::calc_thrust_to_pwm``), while a T200 pushes nothing inside its deadband and then bends
-up roughly quadratically (:mod:`maptidal.controllers.thrusters`). By default
-(``ModeParams.linearise_thrust``) the
-mixer's outputs are read as fractions of each thruster's full thrust and the curve is inverted per
+up roughly quadratically (:mod:`maptidal.controllers.thrusters`). By default (``ModeParams.linearise_thrust``)
+the mixer's outputs are read as fractions of each thruster's full thrust and the curve is inverted per
 thruster (:func:`maptidal.controllers.thrusters.linearise_thrusters`, as ArduCopter linearises its
-propellers),
-which keeps ArduSub's gains meaningful on the measured thrusters. Set it False for ArduSub's literal
-path, which the deadband and bend soften (``tests/test_feedback.py``).
+propellers), which keeps ArduSub's gains meaningful on the measured thrusters. Set it False for ArduSub's
+literal path, which the deadband and bend soften (``tests/test_feedback.py``).
 """
 
 from __future__ import annotations

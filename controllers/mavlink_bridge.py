@@ -146,9 +146,8 @@ class VehicleTelemetry:
 
     def estimate(self, surface_z_m: float = 0.0) -> StateEstimate:
         """The telemetry as the :class:`maptidal.controllers.estimation.StateEstimate` the feedback
-        controllers
-        take: world x north, y west, z up with the surface at ``surface_z_m``; body velocity from
-        LOCAL_POSITION_NED rotated into the body (zero until it arrives); depth from the pressure sensor
+        controllers take: world x north, y west, z up with the surface at ``surface_z_m``; body velocity
+        from LOCAL_POSITION_NED rotated into the body (zero until it arrives); depth from the pressure sensor
         while LOCAL_POSITION_NED has not come (a vehicle without a DVL)."""
         rpy = rpy_from_ned(*self.attitude_ned)
         position = np.zeros(3)

@@ -1,9 +1,8 @@
 """ArduSub's MAVLink interface as plain data: the pilot command on the wire, the flight-mode numbers,
 and frame conversions between MAVLink's NED / FRD and our world (z up) and body (FLU) frames.
 
-Both ends use it: :mod:`maptidal.controllers.mavlink_bridge` encodes, the simulator's MAVLink vehicle
-decodes, so
-one 6-DOF pilot command means the same thing on a real ArduSub vehicle and in the simulator.
+Both ends use it: :mod:`maptidal.controllers.mavlink_bridge` encodes, the simulator's MAVLink vehicle decodes,
+so one 6-DOF pilot command means the same thing on a real ArduSub vehicle and in the simulator.
 
 **Pilot command on the wire** (ArduSub, ``ArduSub/joystick.cpp`` and the MANUAL_CONTROL definition):
 
@@ -61,8 +60,7 @@ class WireError(ValueError):
 
 def encode_pilot(command) -> tuple[dict[str, int], list[int]]:
     """A pilot command (anything :func:`maptidal.controllers.convention.pilot_command` takes) as
-    MANUAL_CONTROL
-    fields ``{x, y, z, r}`` and the 8 channels of an RC_CHANNELS_OVERRIDE (roll and pitch)."""
+    MANUAL_CONTROL fields ``{x, y, z, r}`` and the 8 channels of an RC_CHANNELS_OVERRIDE (roll and pitch)."""
     surge, sway, heave, roll, pitch, yaw = pilot_command(command)
     manual = {
         "x": round(float(surge * 1000)),

@@ -15,9 +15,8 @@ design, only adds damping.
 
 The outputs are body-frame forces and torques, turned into the normalised 6-DOF pilot command of
 :mod:`maptidal.controllers.convention` through the inverse of each axis's thrust curve (the T200's deadband
-and
-bend, :meth:`VehicleModel.pilot_command`), so the loops see a linear plant and the same command drives
-the simulator's mixer and a real vehicle over MAVLink.
+and bend, :meth:`VehicleModel.pilot_command`), so the loops see a linear plant and the same command drives the
+simulator's mixer and a real vehicle over MAVLink.
 """
 
 from __future__ import annotations

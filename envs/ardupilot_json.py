@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+
 from maptidal.controllers.mavlink_wire import flu_from_frd, ned_from_world
 from maptidal.controllers.thrusters import pwm_to_command
 from maptidal.envs.simulation import Simulation

@@ -27,11 +27,11 @@ from pathlib import Path
 import cv2
 import mujoco
 import numpy as np
+
+from maptidal.camera import StereoCameraParams
 from maptidal.envs.scenario import Scenario
 from maptidal.envs.vehicle import VehicleParams
 from maptidal.envs.world import RobotPlacement, build_robot_spec, build_tank_spec, compose
-
-from maptidal.camera import StereoCameraParams
 from maptidal.files import atomic_write_bytes, atomic_write_text
 from maptidal.paths import asset
 

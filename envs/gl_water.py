@@ -34,8 +34,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import mujoco
 import numpy as np
-from maptidal.envs.water import WaterParams, visibility_limit_m
 from OpenGL import GL
+
+from maptidal.envs.water import WaterParams, visibility_limit_m
 
 _VERTEX_SHADER = """
 #version 130

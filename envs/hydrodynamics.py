@@ -61,6 +61,7 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+
 from maptidal.envs.vehicle import VehicleParams
 
 log = logging.getLogger(__name__)

@@ -7,9 +7,8 @@ It provides:
   armed flag and ArduSub's custom_mode numbers; SYS_STATUS and AUTOPILOT_VERSION;
 - arming and disarming (MAV_CMD_COMPONENT_ARM_DISARM) and the modes MANUAL, STABILIZE, ALT_HOLD,
   POSHOLD (ArduSub's, from :mod:`maptidal.controllers.flight_modes`) and GUIDED
-  (SET_POSITION_TARGET_LOCAL_NED,
-  flown by :class:`maptidal.controllers.pose.PoseController`), by MAV_CMD_DO_SET_MODE or SET_MODE; a
-  COMMAND_ACK
+  (SET_POSITION_TARGET_LOCAL_NED, flown by :class:`maptidal.controllers.pose.PoseController`), by
+  MAV_CMD_DO_SET_MODE or SET_MODE; a COMMAND_ACK
   for every command, MAV_RESULT_UNSUPPORTED for those it does not implement and DENIED for a mode
   the robot cannot fly (POSHOLD and GUIDED need a DVL);
 - MANUAL_CONTROL and RC_CHANNELS_OVERRIDE (roll and pitch, channels 1 and 2), taken only from the
@@ -39,6 +38,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from maptidal.controllers.estimation import DeadReckoning, EstimatorParams, rotation_from_rpy
 from maptidal.controllers.mavlink_wire import (
     ARDUSUB_MODES,

@@ -20,6 +20,7 @@ import contextlib
 import cv2
 import mujoco
 import numpy as np
+
 from maptidal.envs.gl_water import (
     CameraGeometry,
     GLWaterPass,

@@ -14,11 +14,11 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
+
+from maptidal.checks import check_keys, finite_vector, require
 from maptidal.envs.sensors import SENSORS, SensorNoise
 from maptidal.envs.vehicle import FRAMES, VehicleConfigError, VehicleParams, load_vehicle
 from maptidal.envs.water import WaterParams
-
-from maptidal.checks import check_keys, finite_vector, require
 from maptidal.paths import ASSETS
 from maptidal.tank import DEFAULT_TANK_CONFIG, TankConfigError, TankModel, load_tank_config
 

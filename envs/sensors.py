@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+
 from maptidal.envs.world import ROBOT_SENSORS
 
 WATER_DENSITY = 1000.0  # kg/m^3, fresh water tank

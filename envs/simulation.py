@@ -16,8 +16,7 @@ mixed into thruster commands by ArduSub's mixer for the robot's frame; pass
 
 ``Simulation(..., flight_mode="stabilize")`` or :meth:`Simulation.set_flight_mode` flies a robot in an
 ArduSub flight mode (:mod:`maptidal.controllers.flight_modes`: manual, stabilize, alt_hold, poshold) on the
-state
-estimated from its own sensors; the API's default is "manual", so that a pilot command is exactly the
+state estimated from its own sensors; the API's default is "manual", so that a pilot command is exactly the
 mixer's input, while ``maptidal sim`` flies STABILIZE, as ArduSub pilots do.
 """
 
@@ -36,6 +35,8 @@ from pathlib import Path
 import cv2
 import mujoco
 import numpy as np
+
+from maptidal.camera import StereoCameraParams
 from maptidal.controllers.convention import pilot_command
 from maptidal.controllers.estimation import DeadReckoning, EstimatorParams, StateEstimate, rpy_from_rotation
 from maptidal.controllers.flight_modes import FLIGHT_MODES, FlightController, ModeParams
@@ -59,8 +60,6 @@ from maptidal.envs.scenario import Scenario, check_current, load_scenario
 from maptidal.envs.sensors import RobotSensors
 from maptidal.envs.water import WaterModel, depth_to_range, worker_thread
 from maptidal.envs.world import DEPTH_SENSOR_POSITION, RobotPlacement, camera_offsets, compose
-
-from maptidal.camera import StereoCameraParams
 
 WATER_BACKENDS = ("auto", "gl", "cpu", "prefer-gl")
 
@@ -275,8 +274,8 @@ class Simulation:
     def set_flight_mode(self, robot: str, mode: str) -> None:
         """Fly ``robot`` in an ArduSub flight mode: "manual" (the pilot command goes to the mixer),
         "stabilize", "alt_hold" or "poshold" (:mod:`maptidal.controllers.flight_modes`), on the state
-        estimated
-        from the robot's own sensors, started at its current pose as a vehicle's estimator would be."""
+        estimated from the robot's own sensors, started at its current pose as a vehicle's estimator
+        would be."""
         self._check(robot)
         if mode not in FLIGHT_MODES:
             raise ValueError(f"unknown flight mode {mode!r}; choose one of {', '.join(FLIGHT_MODES)}")
@@ -335,8 +334,7 @@ class Simulation:
     def estimate(self, robot: str) -> StateEstimate:
         """``robot``'s dead-reckoned state from its own sensors, as of the end of the last control period
         (:class:`maptidal.controllers.estimation.DeadReckoning`): what its flight mode flies on. Robots in
-        MANUAL
-        have one after :meth:`track_estimate`."""
+        MANUAL have one after :meth:`track_estimate`."""
         if self._check(robot) not in self._estimators:
             raise ValueError(f"{robot} keeps no estimate in MANUAL: call track_estimate({robot!r}) first")
         return self._estimators[robot].state

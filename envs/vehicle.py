@@ -14,9 +14,9 @@ from functools import cache
 from pathlib import Path
 
 import numpy as np
+
 from maptidal.controllers.pose import VehicleModel
 from maptidal.controllers.thrusters import PwmRange, ThrustCurve, linear_curve, t200_curve
-
 from maptidal.paths import asset
 
 VEHICLE_FILE = asset("bluerov2", "bluerov2.toml")

@@ -8,6 +8,7 @@ from collections.abc import Mapping, Sequence
 import cv2
 import mujoco
 import numpy as np
+
 from maptidal.envs.rendering import CAMERA_SCENE_OPTION
 from maptidal.envs.simulation import Simulation
 

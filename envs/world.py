@@ -14,11 +14,11 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+
+from maptidal.camera import StereoCameraParams
 from maptidal.envs.hydrodynamics import userdata_size
 from maptidal.envs.textures import TextureParams, concrete_texture, floor_texture, fouling_texture
 from maptidal.envs.vehicle import VehicleParams
-
-from maptidal.camera import StereoCameraParams
 from maptidal.tank import TankModel
 
 WALL_THICKNESS = 0.1  # m, collision boxes behind each surface

@@ -19,9 +19,9 @@ from pathlib import Path
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import gymnasium
-import maptidal.envs  # noqa: F401  (registers MapTidal/)
 import numpy as np
 
+import maptidal.envs  # noqa: F401  (registers MapTidal/)
 from maptidal.files import atomic_write_bytes
 from maptidal.progress import ProgressBar
 

@@ -117,9 +117,8 @@ def test_scenario_files_load(tmp_path):
 
 
 def test_example_scenarios_are_in_the_tank_and_as_generated():
-    from maptidal.envs.scenario import inside_tank
-
     from maptidal.allocation.examples import example_scenarios, scenario_text
+    from maptidal.envs.scenario import inside_tank
     from maptidal.tank import TankModel
 
     tank = TankModel()

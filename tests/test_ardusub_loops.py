@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+
 from maptidal.controllers.estimation import StateEstimate
 from maptidal.controllers.flight_modes import (
     ModeParams,

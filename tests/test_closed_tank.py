@@ -12,12 +12,12 @@ import math
 import mujoco
 import numpy as np
 import pytest
+from test_world_geometry import SURFACES_AND_LADDER, TANKS, brute_force_hits
+
 from maptidal.envs.scenario import RobotSpec, Scenario, inside_tank
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.vehicle import load_vehicle
 from maptidal.envs.world import build_tank_spec
-from test_world_geometry import SURFACES_AND_LADDER, TANKS, brute_force_hits
-
 from maptidal.free_space import classify_tasks
 from maptidal.tank import ROOM_DEPTH_M, TankModel
 

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from maptidal.controllers.convention import AXES, CommandError, parse_command, pilot_command
 from maptidal.controllers.mixing import (
     VECTORED_6DOF_FACTORS,

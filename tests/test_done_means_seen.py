@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 import pytest
-from maptidal.controllers.flight_modes import ModeParams, lean_stick, pilot_lean_angles
 
+from maptidal.controllers.flight_modes import ModeParams, lean_stick, pilot_lean_angles
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import read_events
 from maptidal.mission.run import Mission, MissionParams

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from maptidal.controllers.estimation import (
     DeadReckoning,
     EstimatorParams,
@@ -17,7 +18,6 @@ from maptidal.controllers.estimation import (
 from maptidal.envs.scenario import RobotSpec, Scenario
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.vehicle import load_vehicle
-
 from maptidal.tank import TankModel, open_water_config
 
 

@@ -5,12 +5,12 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+
+from maptidal.cli import main
 from maptidal.envs.export import ROBOT_FILE_HEADER, export_world, robot_xml
 from maptidal.envs.scenario import load_scenario
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.vehicle import FRAMES, load_vehicle
-
-from maptidal.cli import main
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from maptidal.controllers.estimation import DeadReckoning, EstimatorParams, wrap_angle
 from maptidal.controllers.flight_modes import ModeParams
 from maptidal.controllers.pid import PID, PIDGains
@@ -22,7 +23,6 @@ from maptidal.controllers.trajectory import (
 from maptidal.envs.scenario import RobotSpec, Scenario
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.vehicle import load_vehicle
-
 from maptidal.tank import TankModel, open_water_config
 
 # ----- units -------------------------------------------------------------------------------------

@@ -12,15 +12,15 @@ import mujoco
 import numpy as np
 import pytest
 from fossen_oracle import normalised, read_vehicle, simulate, thrust
+from scipy.linalg import expm
+from scipy.optimize import brentq
+
 from maptidal.controllers.mixing import MixerParams, mix
 from maptidal.envs.hydrodynamics import hull_wet_fraction
 from maptidal.envs.scenario import RobotSpec, Scenario
 from maptidal.envs.sensors import SensorNoise
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.vehicle import load_vehicle
-from scipy.linalg import expm
-from scipy.optimize import brentq
-
 from maptidal.tank import TankModel, open_water_config
 
 G = 9.81

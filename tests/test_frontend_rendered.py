@@ -11,10 +11,10 @@ import json
 import numpy as np
 import pytest
 from cli_helpers import run_maptidal
-from maptidal.envs.scenario import load_scenario
-from maptidal.envs.water import WaterParams
 
 from maptidal.coverage import CoverageModel
+from maptidal.envs.scenario import load_scenario
+from maptidal.envs.water import WaterParams
 from maptidal.evaluation import EvaluationConfig, config_keyframes, discover_over_keyframes
 from maptidal.frame_discovery import discover_on_recording
 from maptidal.keyframes import RefinementParams, tank_edges

@@ -59,7 +59,6 @@ def test_a_fresh_render_of_the_golden_poses_matches_the_committed_frames(golden)
     import sys
 
     from maptidal.envs.simulation import Simulation
-
     from maptidal.mission.capture import place_camera
 
     sys.path.insert(0, str(GOLDEN.parent))

@@ -6,12 +6,13 @@ from __future__ import annotations
 import math
 
 import gymnasium
-import maptidal.envs  # noqa: F401  (registers the MapTidal/ environments)
 import numpy as np
 import pytest
 from absl.testing import absltest
 from dm_env import test_utils
 from gymnasium.utils.env_checker import check_env
+
+import maptidal.envs  # noqa: F401  (registers the MapTidal/ environments)
 from maptidal.envs.gym.tank_inspection import camera_viewpoint
 
 ENV_IDS = ("MapTidal/GoToPose-v0", "MapTidal/StationKeeping-v0", "MapTidal/TankInspection-v0")
@@ -196,8 +197,9 @@ class _FakeViewer:
 
 
 def test_human_rendering_drives_mujocos_passive_viewer(monkeypatch):
-    import maptidal.envs.gym.core as core
     import mujoco.viewer
+
+    import maptidal.envs.gym.core as core
 
     monkeypatch.setattr(core, "_has_display", lambda: True)
     monkeypatch.setattr(
@@ -229,8 +231,9 @@ def test_human_rendering_without_a_display_says_so(monkeypatch):
 
 
 def test_dm_viewer_is_handed_a_working_environment_factory(monkeypatch):
-    import maptidal.envs.gym.core as core
     from dm_control import viewer
+
+    import maptidal.envs.gym.core as core
     from maptidal.envs.gym.dm_tasks import view
 
     handed = {}
@@ -310,8 +313,9 @@ def test_a_linear_policy_trained_by_the_cross_entropy_method_reaches_the_target(
 
 # ----- the team task and PettingZoo -----------------------------------------------------------------
 def test_team_inspection_passes_the_checkers_of_gymnasium_and_pettingzoo():
-    from maptidal.envs.gym.team_inspection import parallel_env
     from pettingzoo.test import parallel_api_test
+
+    from maptidal.envs.gym.team_inspection import parallel_env
 
     env = gymnasium.make("MapTidal/TeamInspection-v0")
     try:

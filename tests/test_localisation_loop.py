@@ -9,9 +9,9 @@ import math
 
 import numpy as np
 import pytest
+
 from maptidal.controllers.estimation import MotionModel
 from maptidal.controllers.trajectory import PoseTrajectory, Route
-
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import read_events
 from maptidal.mission.run import Mission, MissionParams

@@ -17,6 +17,9 @@ import time
 
 import numpy as np
 import pytest
+from pymavlink import mavutil
+
+from maptidal.cli import main
 from maptidal.controllers.convention import CommandError
 from maptidal.controllers.mavlink_bridge import BridgeError, BridgeParams, MavlinkBridge, load_signing_key
 from maptidal.controllers.mavlink_wire import (
@@ -30,9 +33,6 @@ from maptidal.controllers.thrusters import command_to_pwm
 from maptidal.envs.ardupilot_json import JsonBackend
 from maptidal.envs.mavlink_vehicle import SimVehicle, SimVehicleParams, VehicleEndpointError
 from maptidal.envs.simulation import Simulation
-from pymavlink import mavutil
-
-from maptidal.cli import main
 
 os.environ.setdefault("MAVLINK20", "1")
 KEY = bytes(range(32))

@@ -6,13 +6,13 @@ import mujoco
 import numpy as np
 import pytest
 from fossen_oracle import read_vehicle, simulate
+
 from maptidal.controllers.mixing import MixerParams, mix
 from maptidal.envs import hydrodynamics
 from maptidal.envs.scenario import RobotSpec, Scenario
 from maptidal.envs.sensors import SensorNoise
 from maptidal.envs.simulation import Simulation, SimulationError
 from maptidal.envs.vehicle import load_vehicle
-
 from maptidal.tank import TankModel, open_water_config
 
 QUIET = SensorNoise(0, 0, 0, 0, 0, 0, 0)

@@ -87,6 +87,35 @@ def test_sigterm_on_a_mission_is_one_line_and_143(delay_s, tmp_path):
     assert gone
 
 
+# every long command besides run and batch, with arguments that keep it busy past 3 s on a fast machine
+LONG_COMMANDS = {
+    "compare": ["compare", "--no-write", "--json", "--occlusion"],
+    "sim": ["sim", "--duration", "600", "--json"],
+    "noise-curve": ["noise-curve", "--json"],
+    "sweep": ["sweep", "--jobs", "2", "--no-plots", "--out", "{out}"],
+    "capture": ["capture", "--out", "{out}"],
+}
+# two moments per command, drawn once (seeded): one in the imports and set-up (0.2 to 1 s), one in the
+# work itself (2.5 to 3 s, before the quickest of them, compare, ends on a fast machine)
+COMMAND_CASES = [
+    (name, float(moment))
+    for name, rng in zip(
+        sorted(LONG_COMMANDS), np.random.default_rng(17).spawn(len(LONG_COMMANDS)), strict=True
+    )
+    for moment in (round(rng.uniform(0.2, 1.0), 2), round(rng.uniform(2.5, 3.0), 2))
+]
+
+
+@pytest.mark.parametrize(("name", "delay_s"), COMMAND_CASES)
+def test_ctrl_c_on_every_long_command_is_one_line_and_130(name, delay_s, tmp_path):
+    args = [arg.replace("{out}", str(tmp_path / "out")) for arg in LONG_COMMANDS[name]]
+    status, lines, err, gone = _signal_at(args, signal.SIGINT, delay_s)
+    assert status == 130, err
+    assert len(lines) == 1 and "interrupted" in lines[0], err
+    assert "Traceback" not in err and "Error" not in err, err
+    assert gone, f"a process of {name} outlived it"
+
+
 def test_ctrl_c_on_a_parallel_batch_stops_its_workers_at_once(tmp_path):
     # the batch's missions are long (120 s simulated each): waiting for them would take a minute or more
     start = time.monotonic()

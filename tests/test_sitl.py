@@ -17,13 +17,14 @@ import time
 
 import numpy as np
 import pytest
+from test_mavlink import free_port, wait_until
+
 from maptidal.controllers.convention import pilot_command
 from maptidal.controllers.mavlink_bridge import BridgeParams, MavlinkBridge
 from maptidal.controllers.mixing import MixerParams, mix
 from maptidal.controllers.thrusters import command_to_pwm
 from maptidal.envs.ardupilot_json import JsonBackend
 from maptidal.envs.simulation import Simulation
-from test_mavlink import free_port, wait_until
 
 SITL = os.environ.get("ARDUSUB_SITL")
 pytestmark = [

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from maptidal.controllers.mixing import MixerParams, allocation_matrix, mix
 from maptidal.controllers.thrusters import (
     T200_12V,
@@ -18,7 +19,6 @@ from maptidal.envs.hydrodynamics import body_wrench
 from maptidal.envs.scenario import RobotSpec, Scenario
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.vehicle import ThrusterParams, VehicleConfigError, load_vehicle
-
 from maptidal.tank import TankModel, open_water_config
 
 KGF = 9.80665

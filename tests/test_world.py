@@ -10,6 +10,8 @@ import cv2
 import mujoco
 import numpy as np
 import pytest
+
+from maptidal.cli import main
 from maptidal.envs import rendering
 from maptidal.envs import water as water_module
 from maptidal.envs.rendering import renders_on_gpu
@@ -18,8 +20,6 @@ from maptidal.envs.sensors import SensorNoise, heading_from_field
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.vehicle import load_vehicle
 from maptidal.envs.water import WaterModel, WaterParams
-
-from maptidal.cli import main
 from maptidal.tank import LadderConfig, TankConfig, TankModel, WindowConfig
 
 QUIET = SensorNoise(0, 0, 0, 0, 0, 0, 0)

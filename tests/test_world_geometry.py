@@ -11,10 +11,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+
 from maptidal.envs.export import export_world
 from maptidal.envs.scenario import inside_tank, load_scenario
 from maptidal.envs.world import build_tank_spec, quat_from_axes
-
 from maptidal.tank import LadderConfig, TankConfig, TankModel, WindowConfig
 
 SURFACES_AND_LADDER = np.array([1, 0, 0, 0, 0, 0], np.uint8)  # geom group 0 only

@@ -3,14 +3,11 @@
 - ``MapTidal/GoToPose-v0`` (:class:`maptidal.envs.gym.go_to_pose.GoToPoseEnv`): reach an inspection pose and
   hold it;
 - ``MapTidal/StationKeeping-v0`` (:class:`maptidal.envs.gym.station_keeping.StationKeepingEnv`): hold a pose
-  in a
-  current and turbulence that vary per episode;
+  in a current and turbulence that vary per episode;
 - ``MapTidal/TankInspection-v0`` (:class:`maptidal.envs.gym.tank_inspection.TankInspectionEnv`): see as much
-  of
-  the tank's evaluated walls as possible (reward: newly seen voxels, with occlusion);
+  of the tank's evaluated walls as possible (reward: newly seen voxels, with occlusion);
 - ``MapTidal/TeamInspection-v0`` (:class:`maptidal.envs.gym.team_inspection.TeamInspectionEnv`): N robots
-  share
-  that reward, Dict spaces keyed by robot; :func:`maptidal.envs.gym.team_inspection.parallel_env` is its
+  share that reward, Dict spaces keyed by robot; :func:`maptidal.envs.gym.team_inspection.parallel_env` is its
   PettingZoo ``ParallelEnv``.
 
     import gymnasium, envs

@@ -18,6 +18,7 @@ import gymnasium
 import mujoco
 import numpy as np
 from gymnasium import spaces
+
 from maptidal.controllers.estimation import rotation_from_rpy, wrap_angle
 from maptidal.envs.scenario import Scenario, load_scenario, with_frame
 from maptidal.envs.simulation import Simulation
@@ -25,10 +26,8 @@ from maptidal.envs.views import third_person_frame
 
 ACTIONS = ("pilot", "thrusters")
 IMAGES = (None, "left", "stereo")
-MAX_IMAGE = (
-    800,
-    1280,
-)  # height, width: the tank model's offscreen buffer (maptidal.envs.world.build_tank_spec)
+# height, width: the tank model's offscreen buffer (maptidal.envs.world.build_tank_spec)
+MAX_IMAGE = (800, 1280)
 MAX_EPISODE_S = 86400.0  # a day, as for a mission (maptidal run)
 # where a robot may be put or sent in the OSB tank (tank frame: end wall at x = 0, floor at z = 0):
 # 0.8 m clear of the end wall, 0.8 m of the 2.4 m wall's centre line, 0.5 m above the floor and below

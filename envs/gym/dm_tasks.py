@@ -4,8 +4,7 @@ users (Acme, dm_env).
 Each environment is a :class:`MapTidalPhysics`, a ``dm_control.mujoco.Physics`` around the *same*
 ``MjData`` (and so the same compiled model and hydrodynamics callback) as the Gymnasium task's
 :class:`maptidal.envs.simulation.Simulation`, and a :class:`GymTask` that asks the Gymnasium task for its
-start
-state, observations, reward and termination. No second world is built.
+start state, observations, reward and termination. No second world is built.
 
     from maptidal.envs.gym.dm_tasks import load
     env = load("go_to_pose")                 # or "station_keeping", "tank_inspection"
@@ -27,6 +26,7 @@ from dm_control.mujoco import wrapper
 from dm_control.rl import control
 from dm_control.suite import base
 from dm_env import specs
+
 from maptidal.envs.gym.core import MapTidalEnv
 from maptidal.envs.gym.go_to_pose import GoToPoseEnv
 from maptidal.envs.gym.station_keeping import StationKeepingEnv

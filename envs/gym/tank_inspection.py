@@ -7,9 +7,9 @@ import math
 import mujoco
 import numpy as np
 from gymnasium import spaces
-from maptidal.envs.gym.core import SAFE_BOX, MapTidalEnv
 
 from maptidal.coverage import CoverageModel, CoverageParams, SeenVoxels
+from maptidal.envs.gym.core import SAFE_BOX, MapTidalEnv
 
 SECTORS = 8  # coverage summary: the evaluated walls in eight sectors around the tank's centre line
 REWARD_PER_VOXEL = 0.01

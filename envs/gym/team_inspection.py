@@ -10,6 +10,8 @@ import gymnasium
 import mujoco
 import numpy as np
 from gymnasium import spaces
+
+from maptidal.baselines import voronoi_viewpoints
 from maptidal.controllers.pose import PoseController
 from maptidal.controllers.task import TaskExecutor, TaskParams
 from maptidal.envs.gym.core import SAFE_BOX, EnvOptions, EpisodeState
@@ -17,8 +19,6 @@ from maptidal.envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCov
 from maptidal.envs.scenario import Scenario, load_scenario, with_frame
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.views import third_person_frame
-
-from maptidal.baselines import voronoi_viewpoints
 
 MAX_ROBOTS = 4
 MIN_SEPARATION_M = 0.9  # start poses at least this far apart (a Heavy is 0.58 m wide)

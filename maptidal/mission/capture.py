@@ -123,8 +123,7 @@ def capture(
 ) -> Recording:
     """Fly ``params.path`` in ``scenario`` and write the recording to ``out_dir``; returns it loaded.
     ``water_backend`` is :class:`maptidal.envs.simulation.Simulation`'s (``"cpu"`` gives the same pixels on
-    every
-    machine); ``camera`` the stereo pair (default: the OAK-D at 640x400; the mission draws 320x200)."""
+    every machine); ``camera`` the stereo pair (default: the OAK-D at 640x400; the mission draws 320x200)."""
     params = params or CaptureParams()
     scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     sim = Simulation(scenario, camera=camera, flight_mode="stabilize", water_backend=water_backend)

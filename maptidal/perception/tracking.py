@@ -49,6 +49,7 @@ def track_points(
     if len(points) == 0:
         return np.zeros((0, 2)), np.zeros(0, bool)
     window = (params.window_px, params.window_px)
+    guess = None
     if predicted is not None:
         guess = np.asarray(predicted, np.float32).reshape(-1, 1, 2)
         if guess.shape != points.shape or not np.all(np.isfinite(guess)):
@@ -56,32 +57,18 @@ def track_points(
         height, width = after.shape
         guess[..., 0] = np.clip(guess[..., 0], 0, width - 1)
         guess[..., 1] = np.clip(guess[..., 1], 0, height - 1)
-        forward, ok_f, _ = cv2.calcOpticalFlowPyrLK(
-            before,
-            after,
-            points,
-            guess.copy(),
-            winSize=window,
-            maxLevel=params.pyramid_levels,
-            flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
+
+    def klt(source, target, start, initial):
+        # KLT from ``start`` in ``source`` to ``target``, its search begun at ``initial`` when given
+        flags = cv2.OPTFLOW_USE_INITIAL_FLOW if initial is not None else 0
+        initial = None if initial is None else initial.copy()
+        return cv2.calcOpticalFlowPyrLK(
+            source, target, start, initial, winSize=window, maxLevel=params.pyramid_levels, flags=flags
         )
-        # back from where it was found, searching from the old pixel: the same check as unaided
-        backward, ok_b, _ = cv2.calcOpticalFlowPyrLK(
-            after,
-            before,
-            forward,
-            points.copy(),
-            winSize=window,
-            maxLevel=params.pyramid_levels,
-            flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
-        )
-    else:
-        forward, ok_f, _ = cv2.calcOpticalFlowPyrLK(
-            before, after, points, None, winSize=window, maxLevel=params.pyramid_levels
-        )
-        backward, ok_b, _ = cv2.calcOpticalFlowPyrLK(
-            after, before, forward, None, winSize=window, maxLevel=params.pyramid_levels
-        )
+
+    forward, ok_f, _ = klt(before, after, points, guess)
+    # back from where it was found; with a prediction, searching from the old pixel
+    backward, ok_b, _ = klt(after, before, forward, None if guess is None else points)
     error = np.linalg.norm(backward.reshape(-1, 2) - points.reshape(-1, 2), axis=1)
     height, width = after.shape
     new = forward.reshape(-1, 2)

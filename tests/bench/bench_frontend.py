@@ -17,7 +17,6 @@ import time
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from maptidal.envs.simulation import Simulation
-
 from maptidal.frame_discovery import discover_on_recording
 from maptidal.mission.capture import CaptureParams, capture, place_camera
 from maptidal.perception.frontend import FrontEndParams

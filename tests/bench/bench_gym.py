@@ -11,8 +11,9 @@ import os
 import time
 
 import gymnasium
-import maptidal.envs  # noqa: F401
 import numpy as np
+
+import maptidal.envs  # noqa: F401
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 

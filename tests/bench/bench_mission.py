@@ -23,9 +23,8 @@ import numpy as np
 
 def floor_factor(scenario, params, duration_s: float) -> float:
     """Real-time factor of bare stepping and rendering (the mission's floor)."""
-    from maptidal.envs.simulation import Simulation
-
     from maptidal.camera import StereoCameraParams
+    from maptidal.envs.simulation import Simulation
 
     width, height = params.image_size
     sim = Simulation(

@@ -16,9 +16,8 @@ import time
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from maptidal.envs.scenario import load_scenario
-
 from maptidal.camera import StereoCameraParams
+from maptidal.envs.scenario import load_scenario
 from maptidal.mission.capture import CaptureParams, capture
 from maptidal.perception.frontend import FrontEndParams, absolute_trajectory_error, run_frontend
 from maptidal.perception.relocalisation import RelocalisationParams

@@ -20,13 +20,13 @@ import time
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import mujoco
+
 from maptidal.envs import hydrodynamics
 from maptidal.envs.rendering import CAMERA_SCENE_OPTION, describe_renderer
 from maptidal.envs.scenario import RobotSpec, Scenario
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.vehicle import load_vehicle
 from maptidal.envs.water import WaterModel, WaterParams
-
 from maptidal.tank import TankModel
 
 

@@ -21,10 +21,10 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
-from maptidal.envs.scenario import load_scenario
-from maptidal.envs.water import WaterParams
 
 from maptidal.camera import StereoCameraParams
+from maptidal.envs.scenario import load_scenario
+from maptidal.envs.water import WaterParams
 from maptidal.frame_discovery import discover_on_recording
 from maptidal.keyframes import PaperCaptureParams
 from maptidal.mission.capture import CaptureParams, capture
