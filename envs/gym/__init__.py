@@ -1,4 +1,5 @@
-"""maptidal's Gymnasium environments, registered under the ``MapTidal/`` namespace on ``import envs``:
+"""maptidal's Gymnasium environments, registered under the ``MapTidal/`` namespace on
+``import maptidal.envs``:
 
 - ``MapTidal/GoToPose-v0`` (:class:`maptidal.envs.gym.go_to_pose.GoToPoseEnv`): reach an inspection pose and
   hold it;
@@ -10,7 +11,7 @@
   share that reward, Dict spaces keyed by robot; :func:`maptidal.envs.gym.team_inspection.parallel_env` is its
   PettingZoo ``ParallelEnv``.
 
-    import gymnasium, envs
+    import gymnasium, maptidal.envs
     env = gymnasium.make("MapTidal/GoToPose-v0")
 
 The same tasks as dm_control environments: :func:`maptidal.envs.gym.dm_tasks.load`.

@@ -37,7 +37,7 @@ from maptidal.perception.landmarks import FusionParams, LandmarkMap, stereo_cova
 from maptidal.perception.mesher import MesherParams, kimera_mesh
 from maptidal.perception.odometry import OdometryParams, VisualOdometry, relative_motion
 from maptidal.perception.recording import CameraIntrinsics, CameraPose, Recording, RecordingError
-from maptidal.perception.relocalisation import AnchorMap, RelocalisationParams, describe
+from maptidal.perception.relocalisation import AnchorMap, RelocalisationParams, describe, project
 from maptidal.perception.stereo import (
     FrontEndInputError,
     StereoParams,
@@ -132,26 +132,26 @@ class FrontEnd:
         previous = self._previous_pose
         if not self.params.predict_tracks or previous is None:
             return None
-        matrix = self.intrinsics.matrix
-        rotation = pose.rotation.T @ previous.rotation  # last optical frame -> this one
-        translation = pose.rotation.T @ (previous.position - pose.position)
+        k = self.intrinsics
         known = self._previous_points
 
         def predict(ids: np.ndarray, pixels: np.ndarray) -> np.ndarray:
             depths = [point[2] for point in known.values() if point[2] > 0]
             depth = float(np.median(depths)) if depths else 2.0
-            rays = np.column_stack([pixels, np.ones(len(pixels))]) @ np.linalg.inv(matrix).T
-            points = rays * depth
+            pixels = np.asarray(pixels, float)
+            points = np.column_stack(
+                [
+                    (pixels[:, 0] - k.cx) / k.fx * depth,
+                    (pixels[:, 1] - k.cy) / k.fy * depth,
+                    np.full(len(pixels), depth),
+                ]
+            )
             for row, landmark in enumerate(ids):
                 point = known.get(int(landmark))
                 if point is not None and point[2] > 0:
                     points[row] = point
-            moved = points @ rotation.T + translation
-            ahead = moved[:, 2] > 0.05
-            guess = np.asarray(pixels, float).copy()
-            projected = moved[ahead] @ matrix.T
-            guess[ahead] = projected[:, :2] / projected[:, 2:3]
-            return guess
+            guess, depth_now = project(previous.to_world(points), pose.position, pose.rotation, k)
+            return np.where((depth_now > 0.05)[:, None], guess, pixels)  # behind the camera: as it was
 
         return predict
 
@@ -167,8 +167,8 @@ class FrontEnd:
         """One frame; ``pose`` is the source's pose (for ``vo``, the dead-reckoned one it corrects)."""
         k = self.intrinsics
         clock = self._stage_s
-        source_pose = pose
         ids, pixels, tracked = self.tracker.update(left, self._predictor(pose))
+        self._previous_pose = pose  # the source's pose, before the front end corrects it
         start = time.perf_counter()
         disparity = match_stereo(left, right, pixels, self.params.stereo)
         clock["matching"] += time.perf_counter() - start
@@ -193,7 +193,6 @@ class FrontEnd:
             if self.params.relocalisation.enabled:
                 pose, relocalised = self._relocalise(left, pixels, points_camera, kept, pose)
         self._previous_points = {int(ids[row]): points_camera[n] for n, row in enumerate(kept)}
-        self._previous_pose = source_pose
         self._last_time_s = time_s
         clock["localisation"] += time.perf_counter() - start
         start = time.perf_counter()

@@ -49,12 +49,12 @@ def track_points(
     if len(points) == 0:
         return np.zeros((0, 2)), np.zeros(0, bool)
     window = (params.window_px, params.window_px)
+    height, width = after.shape
     guess = None
     if predicted is not None:
         guess = np.asarray(predicted, np.float32).reshape(-1, 1, 2)
         if guess.shape != points.shape or not np.all(np.isfinite(guess)):
             raise ValueError(f"predicted pixels must be finite and one per point {points.shape[:1]}")
-        height, width = after.shape
         guess[..., 0] = np.clip(guess[..., 0], 0, width - 1)
         guess[..., 1] = np.clip(guess[..., 1], 0, height - 1)
 
@@ -70,7 +70,6 @@ def track_points(
     # back from where it was found; with a prediction, searching from the old pixel
     backward, ok_b, _ = klt(after, before, forward, None if guess is None else points)
     error = np.linalg.norm(backward.reshape(-1, 2) - points.reshape(-1, 2), axis=1)
-    height, width = after.shape
     new = forward.reshape(-1, 2)
     inside = (new[:, 0] >= 0) & (new[:, 0] < width) & (new[:, 1] >= 0) & (new[:, 1] < height)
     ok = (
