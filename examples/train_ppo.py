@@ -1,4 +1,4 @@
-"""Train Stable-Baselines3 PPO on MapTidal/GoToPose-v0, report the success rate, and plot the learning
+"""Train Stable-Baselines3 PPO on MapTidal/GoToPose-v1, report the success rate, and plot the learning
 curve.
 
     pip install -e .[rl]          # stable-baselines3 and torch 2.13.0 (CPU), outside the default install
@@ -25,7 +25,7 @@ import maptidal.envs  # noqa: F401  (registers MapTidal/)
 from maptidal.files import atomic_write_bytes
 from maptidal.progress import ProgressBar
 
-ENV_ID = "MapTidal/GoToPose-v0"
+ENV_ID = "MapTidal/GoToPose-v1"
 
 
 def make_env(seed: int):

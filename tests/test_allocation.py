@@ -59,8 +59,9 @@ entry_st = st.tuples(
     entries=st.lists(entry_st, max_size=30),
     n_tasks=st.integers(0, 4),
     position_cm=st.one_of(st.none(), st.tuples(*[st.integers(-32767, 32767)] * 3)),
+    giving_way=st.booleans(),
 )
-def test_messages_round_trip_exactly(sender, seq, clocks, acks, entries, n_tasks, position_cm):
+def test_messages_round_trip_exactly(sender, seq, clocks, acks, entries, n_tasks, position_cm, giving_way):
     tasks = [
         Task.create(task_key(3, c), [c * 0.37, -2.5, 1.01], [1, c, -0.5], ("camera",)) for c in range(n_tasks)
     ]
@@ -74,10 +75,12 @@ def test_messages_round_trip_exactly(sender, seq, clocks, acks, entries, n_tasks
         winners=np.array([w for _, _, w, _ in entries], dtype=np.int64),
         bids=np.array([b for *_, b in entries]),
         position=None if position_cm is None else tuple(v / 100.0 for v in position_cm),
+        giving_way=giving_way,
     )
     data = encode(message)
     assert len(data) == size_of(len(clocks), len(acks), n_tasks, len(entries))
     assert decode(data).position == message.position  # to the centimetre, or unknown
+    assert decode(data).giving_way == giving_way
     back = decode(data)
     assert (back.sender, back.seq, back.acks) == (sender, seq, acks)
     assert back.clocks_ms.tolist() == clocks
@@ -205,6 +208,18 @@ def test_damaged_messages_are_rejected_with_a_reason(mangle, reason):
     with pytest.raises(MessageError) as caught:
         decode(mangle(_a_message()))
     assert caught.value.reason == reason
+
+
+def test_status_bits_beyond_giving_way_are_malformed():
+    body = bytearray(_a_message()[:-2])
+    status_at = 7 + 6  # after the header (version, sender, seq u32, n_clocks) and the position
+    assert body[status_at] == 0
+    body[status_at] = 0x02
+    with pytest.raises(MessageError) as caught:
+        decode(_with_crc(bytes(body)))
+    assert caught.value.reason == "malformed"
+    body[status_at] = 0x01
+    assert decode(_with_crc(bytes(body))).giving_way
 
 
 def test_wrong_version_is_rejected_even_with_a_good_checksum():

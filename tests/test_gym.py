@@ -15,7 +15,7 @@ from gymnasium.utils.env_checker import check_env
 import maptidal.envs  # noqa: F401  (registers the MapTidal/ environments)
 from maptidal.envs.gym.tank_inspection import camera_viewpoint
 
-ENV_IDS = ("MapTidal/GoToPose-v0", "MapTidal/StationKeeping-v0", "MapTidal/TankInspection-v0")
+ENV_IDS = ("MapTidal/GoToPose-v1", "MapTidal/StationKeeping-v1", "MapTidal/TankInspection-v1")
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
@@ -32,7 +32,7 @@ def test_gymnasium_check_env_passes(env_id, options):
 
 @pytest.mark.parametrize("mode", ["sync", "async"])
 def test_environments_vectorise(mode):
-    envs_ = gymnasium.make_vec("MapTidal/GoToPose-v0", num_envs=2, vectorization_mode=mode, flat_obs=True)
+    envs_ = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=2, vectorization_mode=mode, flat_obs=True)
     try:
         observations, _ = envs_.reset(seed=3)
         assert observations.shape == (2, envs_.single_observation_space.shape[0])
@@ -72,7 +72,7 @@ def _toward(observation, sign: float = 1.0) -> np.ndarray:
 
 
 def test_moving_towards_the_target_earns_more_than_moving_away():
-    env = gymnasium.make("MapTidal/GoToPose-v0")
+    env = gymnasium.make("MapTidal/GoToPose-v1")
     try:
         totals = []
         for sign in (1.0, -1.0):
@@ -89,24 +89,28 @@ def test_moving_towards_the_target_earns_more_than_moving_away():
     assert totals[0] > 0 > totals[1]
 
 
-def test_a_collision_is_penalised_and_ends_the_episode():
-    env = gymnasium.make("MapTidal/GoToPose-v0")
+def test_a_collision_costs_per_second_in_contact_and_ends_nothing():
+    env = gymnasium.make("MapTidal/GoToPose-v1")
     try:
         env.reset(seed=2)
         inner = env.unwrapped
         inner.sim.place(inner.robot, [-0.45, 0.0, 1.0], 0.0)  # nose 0.2 m from the end wall, facing it
+        touching = []
         for _ in range(30):
-            _, reward, terminated, truncated, _ = env.step(np.array([1, 0, 0, 0, 0, 0], np.float32))
-            if terminated or truncated:
-                break
-        assert terminated and reward < -5
-        assert inner.sim.contacts()
+            _, reward, terminated, truncated, info = env.step(np.array([1, 0, 0, 0, 0, 0], np.float32))
+            assert not terminated and not truncated
+            if info["contact_s"] > 0:
+                touching.append((reward, info["contact_s"]))
+        assert inner.sim.contacts() and len(touching) >= 10  # pressed on the wall, the episode goes on
+        for reward, contact_s in touching:
+            assert contact_s <= inner.dt + 1e-9
+            assert reward < 0.5 - 10.0 * contact_s  # pressed on a wall the other terms pay little; the cost
     finally:
         env.close()
 
 
 def test_station_keeping_currents_vary_per_episode_and_push_an_idle_robot():
-    env = gymnasium.make("MapTidal/StationKeeping-v0", turbulence_m_s=0.0)
+    env = gymnasium.make("MapTidal/StationKeeping-v1", turbulence_m_s=0.0)
     try:
         currents = []
         for seed in (1, 2):
@@ -127,7 +131,7 @@ def test_station_keeping_currents_vary_per_episode_and_push_an_idle_robot():
 
 
 def test_inspection_pays_for_new_views_and_nothing_for_looking_again():
-    env = gymnasium.make("MapTidal/TankInspection-v0")
+    env = gymnasium.make("MapTidal/TankInspection-v1")
     try:
         observation, _ = env.reset(seed=1)
         start = observation["coverage"][0]
@@ -149,7 +153,7 @@ def test_inspection_pays_for_new_views_and_nothing_for_looking_again():
 def test_the_incremental_count_sees_what_the_whole_trajectory_sees():
     """The reward counts rays only to voxels not yet seen; the set seen must equal a full count of every
     viewpoint flown (CoverageModel.views over all voxels, the coverage evaluation's own path)."""
-    env = gymnasium.make("MapTidal/TankInspection-v0")
+    env = gymnasium.make("MapTidal/TankInspection-v1")
     try:
         env.reset(seed=4)
         inner = env.unwrapped
@@ -169,7 +173,7 @@ def test_the_incremental_count_sees_what_the_whole_trajectory_sees():
 
 
 def test_rgb_array_rendering_shows_the_robot_with_its_camera_inset():
-    env = gymnasium.make("MapTidal/GoToPose-v0", render_mode="rgb_array")
+    env = gymnasium.make("MapTidal/GoToPose-v1", render_mode="rgb_array")
     try:
         env.reset(seed=0)
         frame = env.render()
@@ -207,7 +211,7 @@ def test_human_rendering_drives_mujocos_passive_viewer(monkeypatch):
     )
     monkeypatch.setattr(mujoco.viewer, "launch_passive", _FakeViewer)
     _FakeViewer.launched.clear()
-    env = gymnasium.make("MapTidal/GoToPose-v0", render_mode="human")
+    env = gymnasium.make("MapTidal/GoToPose-v1", render_mode="human")
     env.reset(seed=0)
     assert env.render() is None
     env.step(np.zeros(6, np.float32))
@@ -262,8 +266,8 @@ def test_dm_viewer_is_handed_a_working_environment_factory(monkeypatch):
 )
 def test_bad_arguments_give_a_clear_error(options, message):
     with pytest.raises(ValueError, match=message):
-        gymnasium.make("MapTidal/GoToPose-v0", **options)
-    env = gymnasium.make("MapTidal/GoToPose-v0")
+        gymnasium.make("MapTidal/GoToPose-v1", **options)
+    env = gymnasium.make("MapTidal/GoToPose-v1")
     try:
         env.reset(seed=0)
         with pytest.raises(ValueError, match="finite"):
@@ -296,7 +300,7 @@ def _episode(env, theta, seed) -> tuple[float, bool]:
 def test_a_linear_policy_trained_by_the_cross_entropy_method_reaches_the_target():
     """The reward and the observations carry the signal: from zero gains, six CEM generations of 16
     (one common episode each) find a policy that reaches the pose in most new episodes."""
-    env = gymnasium.make("MapTidal/GoToPose-v0", episode_s=8.0)
+    env = gymnasium.make("MapTidal/GoToPose-v1", episode_s=8.0)
     rng = np.random.default_rng(0)
     mean, std = np.zeros(8), np.ones(8)
     try:
@@ -317,7 +321,7 @@ def test_team_inspection_passes_the_checkers_of_gymnasium_and_pettingzoo():
 
     from maptidal.envs.gym.team_inspection import parallel_env
 
-    env = gymnasium.make("MapTidal/TeamInspection-v0")
+    env = gymnasium.make("MapTidal/TeamInspection-v1")
     try:
         check_env(env.unwrapped)
     finally:
@@ -330,7 +334,7 @@ def test_team_inspection_passes_the_checkers_of_gymnasium_and_pettingzoo():
 
 
 def test_the_team_shares_one_reward_for_what_any_robot_sees():
-    env = gymnasium.make("MapTidal/TeamInspection-v0", n_robots=2)
+    env = gymnasium.make("MapTidal/TeamInspection-v1", n_robots=2)
     try:
         observations, _ = env.reset(seed=7)
         assert set(observations) == {"rov0", "rov1"}
@@ -355,7 +359,7 @@ def _viewpoint(inner, name):
 
 
 def test_the_team_renders_with_every_robots_camera_inset():
-    env = gymnasium.make("MapTidal/TeamInspection-v0", render_mode="rgb_array")
+    env = gymnasium.make("MapTidal/TeamInspection-v1", render_mode="rgb_array")
     try:
         env.reset(seed=0)
         frame = env.render()
@@ -369,7 +373,7 @@ def test_the_team_renders_with_every_robots_camera_inset():
 @pytest.mark.parametrize("bad", [0, 5, 1.5, "two"])
 def test_a_bad_robot_count_is_refused(bad):
     with pytest.raises(ValueError, match="n_robots"):
-        gymnasium.make("MapTidal/TeamInspection-v0", n_robots=bad)
+        gymnasium.make("MapTidal/TeamInspection-v1", n_robots=bad)
 
 
 # ----- dm_control ---------------------------------------------------------------------------------
@@ -412,7 +416,7 @@ def test_the_dm_control_task_shares_the_gymnasium_tasks_world_and_rewards():
 
 
 def test_the_team_can_pick_tasks_that_go_to_pose_flies():
-    env = gymnasium.make("MapTidal/TeamInspection-v0", action="tasks")
+    env = gymnasium.make("MapTidal/TeamInspection-v1", action="tasks")
     try:
         assert env.action_space["rov0"] == gymnasium.spaces.Discrete(20)
         observations, _ = env.reset(seed=0)
@@ -431,7 +435,7 @@ def test_the_team_can_pick_tasks_that_go_to_pose_flies():
             env.step({"rov0": 20, "rov1": 0})
     finally:
         env.close()
-    quick = gymnasium.make("MapTidal/TeamInspection-v0", action="tasks", task_timeout_s=3.0)
+    quick = gymnasium.make("MapTidal/TeamInspection-v1", action="tasks", task_timeout_s=3.0)
     try:
         check_env(quick.unwrapped)
     finally:
@@ -461,18 +465,18 @@ def test_bad_options_are_refused_before_anything_is_built(options, message):
 def test_a_step_before_reset_or_after_the_episode_ended_raises():
     from maptidal.envs.gym.station_keeping import StationKeepingEnv
 
-    env = StationKeepingEnv()  # unwrapped: Gymnasium's OrderEnforcing is not there to catch it
+    env = StationKeepingEnv(episode_s=1.0)  # unwrapped: Gymnasium's OrderEnforcing is not there to catch it
     try:
         with pytest.raises(gymnasium.error.ResetNeeded, match="before step"):
             env.step(np.zeros(6, np.float32))
         env.reset(seed=0)
-        up = np.array([0, 0, 1, 0, 0, 0], np.float32)  # full heave: the robot surfaces and the episode ends
+        up = np.array([0, 0, 1, 0, 0, 0], np.float32)
         for _ in range(env.max_steps):
             _, _, terminated, truncated, _ = env.step(up)
             if terminated or truncated:
                 break
-        assert terminated
-        with pytest.raises(gymnasium.error.ResetNeeded, match="terminated"):
+        assert truncated and not terminated
+        with pytest.raises(gymnasium.error.ResetNeeded, match="truncated"):
             env.step(up)
         env.reset(seed=1)
         env.step(np.zeros(6, np.float32))  # a new episode steps again

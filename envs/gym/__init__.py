@@ -1,18 +1,18 @@
 """maptidal's Gymnasium environments, registered under the ``MapTidal/`` namespace on
 ``import maptidal.envs``:
 
-- ``MapTidal/GoToPose-v0`` (:class:`maptidal.envs.gym.go_to_pose.GoToPoseEnv`): reach an inspection pose and
+- ``MapTidal/GoToPose-v1`` (:class:`maptidal.envs.gym.go_to_pose.GoToPoseEnv`): reach an inspection pose and
   hold it;
-- ``MapTidal/StationKeeping-v0`` (:class:`maptidal.envs.gym.station_keeping.StationKeepingEnv`): hold a pose
+- ``MapTidal/StationKeeping-v1`` (:class:`maptidal.envs.gym.station_keeping.StationKeepingEnv`): hold a pose
   in a current and turbulence that vary per episode;
-- ``MapTidal/TankInspection-v0`` (:class:`maptidal.envs.gym.tank_inspection.TankInspectionEnv`): see as much
+- ``MapTidal/TankInspection-v1`` (:class:`maptidal.envs.gym.tank_inspection.TankInspectionEnv`): see as much
   of the tank's evaluated walls as possible (reward: newly seen voxels, with occlusion);
-- ``MapTidal/TeamInspection-v0`` (:class:`maptidal.envs.gym.team_inspection.TeamInspectionEnv`): N robots
+- ``MapTidal/TeamInspection-v1`` (:class:`maptidal.envs.gym.team_inspection.TeamInspectionEnv`): N robots
   share that reward, Dict spaces keyed by robot; :func:`maptidal.envs.gym.team_inspection.parallel_env` is its
   PettingZoo ``ParallelEnv``.
 
     import gymnasium, maptidal.envs
-    env = gymnasium.make("MapTidal/GoToPose-v0")
+    env = gymnasium.make("MapTidal/GoToPose-v1")
 
 The same tasks as dm_control environments: :func:`maptidal.envs.gym.dm_tasks.load`.
 """
@@ -20,10 +20,10 @@ The same tasks as dm_control environments: :func:`maptidal.envs.gym.dm_tasks.loa
 from __future__ import annotations
 
 ENVIRONMENTS = {
-    "MapTidal/GoToPose-v0": "maptidal.envs.gym.go_to_pose:GoToPoseEnv",
-    "MapTidal/StationKeeping-v0": "maptidal.envs.gym.station_keeping:StationKeepingEnv",
-    "MapTidal/TankInspection-v0": "maptidal.envs.gym.tank_inspection:TankInspectionEnv",
-    "MapTidal/TeamInspection-v0": "maptidal.envs.gym.team_inspection:TeamInspectionEnv",
+    "MapTidal/GoToPose-v1": "maptidal.envs.gym.go_to_pose:GoToPoseEnv",
+    "MapTidal/StationKeeping-v1": "maptidal.envs.gym.station_keeping:StationKeepingEnv",
+    "MapTidal/TankInspection-v1": "maptidal.envs.gym.tank_inspection:TankInspectionEnv",
+    "MapTidal/TeamInspection-v1": "maptidal.envs.gym.team_inspection:TeamInspectionEnv",
 }
 
 

@@ -33,6 +33,11 @@ MAX_EPISODE_S = 86400.0  # a day, as for a mission (maptidal run)
 # 0.8 m clear of the end wall, 0.8 m of the 2.4 m wall's centre line, 0.5 m above the floor and below
 # the 2.0 m surface
 SAFE_BOX = (np.array([-3.0, -0.8, 0.5]), np.array([-0.8, 0.8, 1.5]))
+# what a second in contact with the tank or a teammate costs, in every task. A contact, like surfacing,
+# does not end an episode (v1): where one did, ending it was a policy's cheapest way out of negative
+# per-step rewards (a PPO policy on StationKeeping-v0 learned to surface at once, -13 against -91 for
+# doing nothing). At 0.1 s a step that is 1 per step in contact, the most any task's reward pays a step
+CONTACT_COST_PER_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -168,6 +173,7 @@ class MapTidalEnv(gymnasium.Env):
             self.observation_space = self._dict_space
         self.sim.track_estimate(self.robot)  # the observation's estimate, in MANUAL too
         self._steps = 0
+        self._energy = self._contact_s = 0.0
         self.episode = EpisodeState()
         self._renderer: mujoco.Renderer | None = None
         self._viewer = None
@@ -227,13 +233,15 @@ class MapTidalEnv(gymnasium.Env):
             raise ValueError(f"action must be finite, got {a.tolist()}")
         a = a.clip(-1.0, 1.0)
         mode = "thrusters" if self.options.action == "thrusters" else "pilot"
-        energy = 0.0
+        energy, touching = 0.0, 0
         for _ in range(self.substeps):
             self._before_substep()
             self.sim.step({self.robot: a}, mode=mode)
             outputs = self.sim.thruster_outputs(self.robot)
             energy += float(outputs @ outputs) / len(outputs)  # the mean squared command
+            touching += bool(self.sim.contacts())
         self._energy = energy / self.substeps
+        self._contact_s = touching * self.scenario.control_period_s
         self._steps += 1
 
     def _before_substep(self) -> None:
@@ -297,10 +305,10 @@ class MapTidalEnv(gymnasium.Env):
         heading = rotation_from_rpy(0.0, 0.0, e.yaw)
         return np.r_[heading.T @ offset_world, wrap_angle(target_yaw - e.yaw)]
 
-    def _out_of_bounds(self, truth: dict) -> bool:
-        """Left the water, or the evaluated region of the tank."""
-        x, _, z = truth["position"]
-        return bool(z > self.scenario.tank.height - 0.15 or z < 0.15 or x < -6.0)
+    @property
+    def _contact_cost(self) -> float:
+        """What the last step's time in contact costs (``CONTACT_COST_PER_S``)."""
+        return CONTACT_COST_PER_S * self._contact_s
 
     # ----- rendering ------------------------------------------------------------------------
     def render(self):

@@ -1,4 +1,4 @@
-"""``MapTidal/GoToPose-v0``: fly one BlueROV2 to an inspection pose and hold it."""
+"""``MapTidal/GoToPose-v1``: fly one BlueROV2 to an inspection pose and hold it."""
 
 from __future__ import annotations
 
@@ -48,9 +48,18 @@ class GoToPoseEnv(PoseTargetEnv):
 
     ## Rewards
 
-    Per step, from the true pose: ``10 x`` the distance gained towards the target (m), ``+ 2 x`` the yaw
-    error reduced (rad), ``- 0.05 x`` the mean squared thruster command (energy), ``+ 1`` while within
-    0.1 m and 5 deg of the target.
+    Per step, from the true pose:
+
+    | term | value |
+    |---|---|
+    | progress | ``10 x`` the distance gained towards the target (m) |
+    | turning | ``2 x`` the yaw error reduced (rad) |
+    | held | ``1`` while within 0.1 m and 5 deg of the target |
+    | energy | ``- 0.05 x`` the mean squared thruster command |
+    | contact | ``- 10 x`` the seconds of the step in contact with the tank |
+
+    Progress and turning are differences of a potential, so over an episode they add up to what was
+    gained overall: no path pays more than the straight one, and leaving pays back what arriving got.
 
     ## Starting state
 
@@ -59,17 +68,19 @@ class GoToPoseEnv(PoseTargetEnv):
 
     ## Episode end
 
-    Terminated: a collision (-10), or leaving the water or the tank's evaluated region (-10).
-    Truncated: after ``episode_s`` (default 20 s). ``info["is_success"]`` is true while within tolerance.
+    Never terminated: a collision costs per second in contact, and the robot may surface, as a real one
+    would (in v0 both ended the episode, which gave policies a way out). Truncated: after ``episode_s``
+    (default 20 s). ``info["is_success"]`` is true while within tolerance.
 
     ## Arguments
 
-    ``gymnasium.make("MapTidal/GoToPose-v0", action="pilot", flat_obs=False, obs_images=None,
+    ``gymnasium.make("MapTidal/GoToPose-v1", action="pilot", flat_obs=False, obs_images=None,
     image_size=(80, 128), control_period_s=0.1, episode_s=20.0, frame="heavy", scenario=None,
     render_mode=None)``.
 
     ## Version history
 
+    - v1: contacts cost per second and end nothing; surfacing ends nothing.
     - v0: first version (maptidal 0.1).
     """
 
@@ -92,11 +103,13 @@ class GoToPoseEnv(PoseTargetEnv):
     def _reward(self, truth: dict) -> tuple[float, bool, dict]:
         distance, yaw_error, within = self._target_errors(truth)
         reward = 10.0 * (self._previous[0] - distance) + 2.0 * (self._previous[1] - yaw_error)
-        reward -= 0.05 * self._energy
+        reward -= 0.05 * self._energy + self._contact_cost
         reward += 1.0 if within else 0.0
         self._previous = (distance, yaw_error)
-        terminated = False
-        if self.sim.contacts() or self._out_of_bounds(truth):
-            reward -= 10.0
-            terminated = True
-        return reward, terminated, {"is_success": within, "distance_m": distance, "yaw_error_rad": yaw_error}
+        info = {
+            "is_success": within,
+            "distance_m": distance,
+            "yaw_error_rad": yaw_error,
+            "contact_s": self._contact_s,
+        }
+        return reward, False, info

@@ -1,4 +1,4 @@
-"""``MapTidal/StationKeeping-v0``: hold a pose against a current and turbulence that vary per episode."""
+"""``MapTidal/StationKeeping-v1``: hold a pose against a current and turbulence that vary per episode."""
 
 from __future__ import annotations
 
@@ -14,18 +14,28 @@ class StationKeepingEnv(PoseTargetEnv):
 
     ## Action space
 
-    As ``MapTidal/GoToPose-v0``: ``Box(-1, 1, (6,), float32)`` pilot commands through STABILIZE, or
+    As ``MapTidal/GoToPose-v1``: ``Box(-1, 1, (6,), float32)`` pilot commands through STABILIZE, or
     ``action="thrusters"``.
 
     ## Observation space
 
-    As ``MapTidal/GoToPose-v0`` (pose, velocity, depth, imu, target; optional images); ``target`` is the
+    As ``MapTidal/GoToPose-v1`` (pose, velocity, depth, imu, target; optional images); ``target`` is the
     pose to hold, as the robot estimates it (offset in its heading frame, m, and yaw error, rad).
 
     ## Rewards
 
-    Per step, from the true pose: ``- distance`` (m) ``- 0.5 x`` the yaw error (rad) ``- 0.05 x`` the
-    mean squared thruster command, ``+ 1`` while within 0.1 m and 5 deg.
+    Per step, from the true pose, bounded to [-1, 1]:
+
+    | term | value | range |
+    |---|---|---|
+    | position | ``0.5 exp(-distance / 0.2 m)`` | 0 to 0.5 |
+    | heading | ``0.2 exp(-yaw error / 0.2 rad)`` | 0 to 0.2 |
+    | held | ``0.3`` while within 0.1 m and 5 deg | 0 or 0.3 |
+    | energy | the sum above times ``1 - 0.5 x`` the mean squared thruster command | x 0.5 to 1 |
+    | contact | ``- 10 x`` the seconds of the step in contact with the tank | -1 to 0 at 0.1 s |
+
+    Every step away from contact earns something, so no way of ending an episode pays (v0's negative
+    per-step reward made surfacing at once the best a policy could learn).
 
     ## Starting state
 
@@ -36,14 +46,16 @@ class StationKeepingEnv(PoseTargetEnv):
 
     ## Episode end
 
-    Terminated: a collision or leaving the water (-10). Truncated: after ``episode_s`` (default 20 s).
+    Never terminated: a collision costs per second in contact and the robot may surface, as a real one
+    would. Truncated: after ``episode_s`` (default 20 s). ``info["is_success"]``: within tolerance.
 
     ## Arguments
 
-    Those of ``MapTidal/GoToPose-v0``, and ``max_current_m_s=0.2``, ``turbulence_m_s=0.03``.
+    Those of ``MapTidal/GoToPose-v1``, and ``max_current_m_s=0.2``, ``turbulence_m_s=0.03``.
 
     ## Version history
 
+    - v1: a bounded, non-negative per-step reward; contacts cost per second and end nothing.
     - v0: first version (maptidal 0.1).
     """
 
@@ -78,9 +90,12 @@ class StationKeepingEnv(PoseTargetEnv):
 
     def _reward(self, truth: dict) -> tuple[float, bool, dict]:
         distance, yaw_error, within = self._target_errors(truth)
-        reward = -distance - 0.5 * yaw_error - 0.05 * self._energy + (1.0 if within else 0.0)
-        terminated = bool(self.sim.contacts() or self._out_of_bounds(truth))
-        if terminated:
-            reward -= 10.0
-        info = {"is_success": within, "distance_m": distance, "current_m_s": self.mean_current.tolist()}
-        return reward, terminated, info
+        held = 0.5 * math.exp(-distance / 0.2) + 0.2 * math.exp(-yaw_error / 0.2) + (0.3 if within else 0.0)
+        reward = held * (1.0 - 0.5 * self._energy) - self._contact_cost
+        info = {
+            "is_success": within,
+            "distance_m": distance,
+            "current_m_s": self.mean_current.tolist(),
+            "contact_s": self._contact_s,
+        }
+        return reward, False, info

@@ -1,4 +1,4 @@
-"""``MapTidal/TankInspection-v0``: one robot inspects the OSB tank's walls with its camera."""
+"""``MapTidal/TankInspection-v1``: one robot inspects the OSB tank's walls with its camera."""
 
 from __future__ import annotations
 
@@ -70,12 +70,12 @@ class TankInspectionEnv(MapTidalEnv):
 
     ## Action space
 
-    As ``MapTidal/GoToPose-v0``: ``Box(-1, 1, (6,), float32)`` pilot commands through STABILIZE, or
+    As ``MapTidal/GoToPose-v1``: ``Box(-1, 1, (6,), float32)`` pilot commands through STABILIZE, or
     ``action="thrusters"``.
 
     ## Observation space
 
-    pose, velocity, depth and imu as in ``MapTidal/GoToPose-v0`` (estimated, from the robot's sensors),
+    pose, velocity, depth and imu as in ``MapTidal/GoToPose-v1`` (estimated, from the robot's sensors),
     optional images, and:
 
     | key | shape | content | unit |
@@ -88,8 +88,8 @@ class TankInspectionEnv(MapTidalEnv):
 
     Per step: ``0.01 x`` the wall voxels newly seen by the robot's camera (the OAK-D frustum, 2 m range,
     with occlusion, counted by :class:`maptidal.coverage.CoverageModel` on 5 cm voxels, from the true
-    camera pose), ``- 0.05 x`` the mean squared thruster command. Looking again at seen voxels earns
-    nothing.
+    camera pose), ``- 0.05 x`` the mean squared thruster command, ``- 10 x`` the seconds of the step in
+    contact with the tank. Looking again at seen voxels earns nothing.
 
     ## Starting state
 
@@ -98,15 +98,18 @@ class TankInspectionEnv(MapTidalEnv):
 
     ## Episode end
 
-    Terminated: a collision or leaving the water or the evaluated region (-10). Truncated: after
-    ``episode_s`` (default 60 s). ``info["coverage"]`` is the share seen.
+    Never terminated: a collision costs per second in contact and the robot may surface (in v0 both
+    ended the episode, and a policy ramming the nearest wall saw more before the end than one doing
+    nothing, which floated up and ended too). Truncated: after ``episode_s`` (default 60 s).
+    ``info["coverage"]`` is the share seen.
 
     ## Arguments
 
-    Those of ``MapTidal/GoToPose-v0`` (``episode_s`` defaults to 60 s here), and ``voxel_m=0.05``.
+    Those of ``MapTidal/GoToPose-v1`` (``episode_s`` defaults to 60 s here), and ``voxel_m=0.05``.
 
     ## Version history
 
+    - v1: contacts cost per second and end nothing; surfacing ends nothing.
     - v0: first version (maptidal 0.1).
     """
 
@@ -141,9 +144,7 @@ class TankInspectionEnv(MapTidalEnv):
 
     def _reward(self, truth: dict) -> tuple[float, bool, dict]:
         new = self._look(truth)
-        reward = REWARD_PER_VOXEL * new - 0.05 * self._energy
-        terminated = bool(self.sim.contacts() or self._out_of_bounds(truth))
-        if terminated:
-            reward -= 10.0
+        reward = REWARD_PER_VOXEL * new - 0.05 * self._energy - self._contact_cost
         # the summary's first entry is the share seen (recounted only after news)
-        return reward, terminated, {"new_voxels": new, "coverage": float(self.walls.summary()[0])}
+        info = {"new_voxels": new, "coverage": float(self.walls.summary()[0]), "contact_s": self._contact_s}
+        return reward, False, info

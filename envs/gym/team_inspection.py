@@ -1,4 +1,4 @@
-"""``MapTidal/TeamInspection-v0``: N robots share the inspection of the tank; and a PettingZoo
+"""``MapTidal/TeamInspection-v1``: N robots share the inspection of the tank; and a PettingZoo
 ``ParallelEnv`` adapter of it (:func:`parallel_env`), the multi-agent convention."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from gymnasium import spaces
 from maptidal.baselines import voronoi_viewpoints
 from maptidal.controllers.pose import PoseController
 from maptidal.controllers.task import TaskExecutor, TaskParams
-from maptidal.envs.gym.core import SAFE_BOX, EnvOptions, EpisodeState
+from maptidal.envs.gym.core import CONTACT_COST_PER_S, SAFE_BOX, EnvOptions, EpisodeState
 from maptidal.envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
 from maptidal.envs.scenario import Scenario, load_scenario, with_frame
 from maptidal.envs.simulation import Simulation
@@ -38,12 +38,13 @@ class TeamInspectionEnv(gymnasium.Env):
     ``maptidal.controllers.task.TaskExecutor`` (go-to-pose on its own estimate, hold 0.1 m and 5 deg for a 1 s
     dwell; ``task_timeout_s``, 30 s, if it cannot), and the observation adds ``tasks`` (the N poses x,
     y, z, yaw) and ``tasks_done`` (1 for each task captured). The reward is then 0.01 per wall voxel
-    newly seen from where the robots end, minus 0.01 per second spent; the episode ends when every
-    task is done.
+    newly seen from where the robots end, minus 0.01 per second spent and 10 per second any robot is in
+    contact; the episode ends when every task is done (a collision stops that step's flight, and the
+    robots choose again).
 
     ## Observation space
 
-    ``Dict`` keyed by robot name; each robot's entry is the Dict of ``MapTidal/TankInspection-v0``
+    ``Dict`` keyed by robot name; each robot's entry is the Dict of ``MapTidal/TankInspection-v1``
     (pose, velocity, depth, imu, from that robot's own sensors) with ``coverage`` the team's share seen,
     overall and per sector, and ``others``: the other robots' true positions relative to this robot's
     estimate (m, world axes, ``3 x (N - 1)``; what an acoustic position exchange would give). With
@@ -51,9 +52,13 @@ class TeamInspectionEnv(gymnasium.Env):
 
     ## Rewards
 
-    Shared by all robots, per step: ``0.01 x`` the wall voxels newly seen by any robot's camera (with
-    occlusion), ``- 0.05 x`` the robots' mean squared thruster command, ``-10`` on a collision (with the
-    tank or each other) or when a robot leaves the water.
+    Shared by all robots, per step:
+
+    | term | value |
+    |---|---|
+    | coverage | ``0.01 x`` the wall voxels newly seen by any robot's camera (with occlusion) |
+    | energy | ``- 0.05 x`` the robots' mean squared thruster command |
+    | contact | ``- 10 x`` the seconds of the step any robot is in contact (the tank or each other) |
 
     ## Starting state
 
@@ -61,7 +66,9 @@ class TeamInspectionEnv(gymnasium.Env):
 
     ## Episode end
 
-    Terminated: any collision or a robot out of the water. Truncated: after ``episode_s`` (60 s).
+    Terminated: with ``action="tasks"``, when every task is done. Collisions and surfacing end nothing
+    (in v0 they did, and ramming a wall saw more before the end than doing nothing, which floated up
+    and ended too). Truncated: after ``episode_s`` (60 s).
 
     ## Rendering
 
@@ -70,10 +77,11 @@ class TeamInspectionEnv(gymnasium.Env):
     ## Arguments
 
     ``n_robots=2`` (1 to 4), ``action`` ("pilot", "thrusters" or "tasks"), ``task_timeout_s=30``, and
-    those of ``MapTidal/GoToPose-v0`` (``episode_s`` defaults to 60 s).
+    those of ``MapTidal/GoToPose-v1`` (``episode_s`` defaults to 60 s).
 
     ## Version history
 
+    - v1: contacts cost per second and end nothing; surfacing ends nothing.
     - v0: first version (maptidal 0.1).
     """
 
@@ -201,22 +209,20 @@ class TeamInspectionEnv(gymnasium.Env):
                 raise ValueError(f"{name}: action must be {self.action_space[name].shape} finite values")
             commands[name] = np.clip(value, -1.0, 1.0)
         mode = "thrusters" if self.options.action == "thrusters" else "pilot"
-        energy = 0.0
+        energy, touching = 0.0, 0
         for _ in range(self.substeps):
             self.sim.step(commands, mode=mode)
             for name in self.agents:
                 energy += float(np.mean(self.sim.thruster_outputs(name) ** 2))
+            touching += bool(self.sim.contacts())
         self._steps += 1
         new = self._look()
+        contact_s = touching * self.scenario.control_period_s
         reward = REWARD_PER_VOXEL * new - 0.05 * energy / (self.substeps * len(self.agents))
-        truths = [self.sim.ground_truth(name)["position"] for name in self.agents]
-        out = any(z > self.scenario.tank.height - 0.15 or z < 0.15 or x < -6.0 for x, _, z in truths)
-        terminated = bool(self.sim.contacts() or out)
-        if terminated:
-            reward -= 10.0
-        truncated = not terminated and self._steps >= self.max_steps
-        info = {"new_voxels": new, "coverage": float(self.seen.mean())}
-        return self._observation(), float(reward), terminated, bool(truncated), info
+        reward -= CONTACT_COST_PER_S * contact_s
+        truncated = self._steps >= self.max_steps
+        info = {"new_voxels": new, "coverage": float(self.seen.mean()), "contact_s": contact_s}
+        return self._observation(), float(reward), False, bool(truncated), info
 
     def _fly_tasks(self, action):
         chosen = {}
@@ -239,7 +245,7 @@ class TeamInspectionEnv(gymnasium.Env):
         status = dict.fromkeys(self.agents, "approach")
         period = self.scenario.control_period_s
         start = self.sim.time
-        collided = False
+        collided, contact_s = False, 0.0
         while any(s not in ("capture", "timeout") for s in status.values()):
             commands = {}
             for name in self.agents:
@@ -248,7 +254,7 @@ class TeamInspectionEnv(gymnasium.Env):
                     status[name] = now
             self.sim.step(commands)
             if self.sim.contacts():
-                collided = True
+                collided, contact_s = True, contact_s + period
                 break
             if self.sim.time - self._episode_start >= self.options.episode_s:
                 break
@@ -257,14 +263,15 @@ class TeamInspectionEnv(gymnasium.Env):
                 self.tasks_done[k] = True
         new = self._look()
         elapsed = self.sim.time - start
-        reward = REWARD_PER_VOXEL * new - 0.01 * elapsed - (10.0 if collided else 0.0)
-        terminated = collided or bool(self.tasks_done.all())
+        reward = REWARD_PER_VOXEL * new - 0.01 * elapsed - CONTACT_COST_PER_S * contact_s
+        terminated = bool(self.tasks_done.all())
         truncated = not terminated and self.sim.time - self._episode_start >= self.options.episode_s
         info = {
             "new_voxels": new,
             "coverage": float(self.seen.mean()),
             "status": status,
             "elapsed_s": elapsed,
+            "collided": collided,
         }
         return self._observation(), float(reward), bool(terminated), bool(truncated), info
 

@@ -114,6 +114,11 @@ class CBBAAgent:
         self.stats = AgentStats()
         # robot index -> (where it last said it was, m; when that was heard, s)
         self.peer_positions: dict[int, tuple[np.ndarray, float]] = {}
+        # robot index -> whether its last message said it was giving way to a teammate; and whether this
+        # robot gives way now (set by whoever flies it, sent in its messages)
+        self.peer_giving_way: dict[int, bool] = {}
+        self.giving_way = False
+        self._sent_giving_way = False
         self.tasks: list[Task] = []
         self._slot_of: dict[int, int] = {}
         self._keys = np.zeros(0, dtype=np.int64)  # task keys in slot order
@@ -445,6 +450,7 @@ class CBBAAgent:
         self.stats.messages_accepted += 1
         if message.position is not None:
             self.peer_positions[sender] = (np.asarray(message.position, float), now_s)
+        self.peer_giving_way[sender] = message.giving_way
         self._peer_task_array(sender)
         self._apply_acks(sender, message.acks)
         if message.tasks:
@@ -550,7 +556,8 @@ class CBBAAgent:
         return bool(entries.any() or records.any() or any(p in self._ack_owed for p in peers))
 
     def make_message(self, now_s: float, capacity_bytes: int | None = None) -> bytes | None:
-        """The message for this robot's transmit slot, or None when it has nothing to say.
+        """The message for this robot's transmit slot, or None when it has nothing to say (no acks owed, no
+        news of tasks, bids or of its giving way, and no heartbeat due).
 
         It carries the acks owed, then task records and bid entries some live peer lacks (newest
         entries first, each with its task record when needed) as far as capacity_bytes allows."""
@@ -563,7 +570,8 @@ class CBBAAgent:
         heartbeat_due = (
             self._last_sent_ms is None or now - self._last_sent_ms >= self.params.heartbeat_s * 1000
         )
-        if not (entries.any() or records.any() or self._ack_owed or heartbeat_due):
+        news = self.giving_way != self._sent_giving_way  # a teammate may be waiting to hear it
+        if not (entries.any() or records.any() or self._ack_owed or heartbeat_due or news):
             return None
         n_clocks = int(np.flatnonzero(self.clocks != NEVER).max()) + 1
         acks = sorted(self._ack_owed.items())
@@ -587,6 +595,7 @@ class CBBAAgent:
             winners=self.z[entry_slots],
             bids=self.y[entry_slots],
             position=tuple(float(v) for v in self.robot.position),  # type: ignore[arg-type]
+            giving_way=self.giving_way,
         )
         data = encode(message)
         self._sent[self._seq] = (entry_slots, self.z[entry_slots], self.y[entry_slots], record_slots)
@@ -601,6 +610,7 @@ class CBBAAgent:
         for robot, _ in acks:
             del self._ack_owed[robot]
         self._last_sent_ms = now
+        self._sent_giving_way = self.giving_way
         self.last_message_had_content = bool(len(entry_slots) or len(record_slots))
         self.stats.messages_sent += 1
         self.stats.bytes_sent += len(data)

@@ -62,6 +62,7 @@ from maptidal.envs.simulation import Simulation, check_water_backend
 from maptidal.envs.world import camera_offsets
 from maptidal.free_space import free_space_mask
 from maptidal.mission.capture import camera_pose_from_body
+from maptidal.mission.clearance import waiting_point
 from maptidal.mission.outputs import MissionWriter
 from maptidal.mission.perception import FrameJob, FrameResult, start_perception
 from maptidal.mission.sharing import sharing_table, tasks_lost
@@ -137,8 +138,10 @@ class MissionParams:
     lost_sigma_m: float = 0.15
     # keeping clear of teammates, on where their last message said they were: two Heavy hulls (0.457 x
     # 0.575 m, Blue Robotics' technical details) touch below 0.73 m centre to centre at worst; 1 m leaves
-    # the rest for the estimates' error. A robot yields to every teammate of a lower index heard from in
-    # the last peer_fresh_s (so two robots never both wait on each other)
+    # the rest for the estimates' error. A robot gives way to every teammate heard from in the last
+    # peer_fresh_s, except a teammate of a higher index whose last message said it was giving way itself:
+    # both sides watch (a robot flying onto one that holds at a viewpoint pushes it off, and its DVL reads
+    # the other's hull), and two robots never wait on each other for longer than a message takes
     clearance_m: float = 1.0
     peer_fresh_s: float = 30.0
     image_size: tuple[int, int] = (320, 200)
@@ -291,6 +294,9 @@ class _Robot:
     recovery: Route | None = None  # its way back home when lost, flown from lost_since_s
     lost_since_s: float = 0.0
     yielding: bool = False  # holding its reference out of a teammate's clearance
+    referenced_s: float | None = (
+        None  # when its reference was last worked out (its route pauses while yielding)
+    )
     launch: tuple[np.ndarray, float] | None = None  # a joining robot's parking pose (position, yaw)
     last_left: np.ndarray | None = None  # the latest left image, for the video's inset
     visual_updates: int = 0  # the front end's visual fixes, as of the latest frame result taken
@@ -496,6 +502,14 @@ class Mission:
         robot.route_start_s = now
 
     def _reference(self, robot: _Robot, now: float):
+        if robot.yielding and robot.referenced_s is not None:
+            # a robot giving way pauses its route, and takes it up where it left off: resumed on the
+            # clock, the reference would leap ahead, and the robot rush at full thrust to catch it up
+            paused = now - robot.referenced_s
+            robot.route_start_s += paused
+            if robot.lost:
+                robot.lost_since_s += paused
+        robot.referenced_s = now
         reference = robot.route.at(now - robot.route_start_s)
         if robot.activity == "fly" and robot.goal is not None and robot.goal.pitch:
             # pitch into the view as the route closes in on it, and be there on arrival
@@ -528,39 +542,40 @@ class Mission:
         robot.lost_since_s = now
 
     def _keep_clear(self, robot: _Robot, reference: PoseReference, now: float) -> PoseReference:
-        """The reference moved out of the ``clearance_m`` ball about each teammate the robot yields to
-        (MissionParams), to the nearest point of its surface: a robot whose goal lies inside waits
-        outside until the teammate's next message says it has gone. With several such teammates the
-        balls are visited in turn, a few rounds at most (where they overlap, the last one wins)."""
-        clearance = self.params.clearance_m
+        """The reference held where the robot's straight way to it would enter the ``clearance_m``
+        ball about a teammate it gives way to (MissionParams), on its own side; a robot inside such a
+        ball that is not leaving it backs straight out (:func:`maptidal.mission.clearance.waiting_point`).
+        It waits there until the teammate's next message says it has gone.
+
+        Whom it gives way to: every teammate heard from lately, but one of a higher index only while that
+        one's last message did not say it was giving way. A robot waiting on a lower-indexed teammate says
+        so in its next message, and the other then goes on: two robots never wait on each other for
+        longer than that, and the lower index keeps the right of way."""
+        agent = self.auction.agents[robot.index]
         peers = [
             (peer, position)
-            for peer, (position, heard_s) in self.auction.agents[robot.index].peer_positions.items()
-            if peer < robot.index and now - heard_s <= self.params.peer_fresh_s
+            for peer, (position, heard_s) in agent.peer_positions.items()
+            if now - heard_s <= self.params.peer_fresh_s
+            and (peer < robot.index or not agent.peer_giving_way.get(peer, False))
         ]
-        target, blocking = reference.position, None
-        for _ in range(3):
-            moved = False
-            for peer, position in peers:
-                offset = target - position
-                distance = float(np.linalg.norm(offset))
-                if distance >= clearance - 1e-9:
-                    continue
-                if distance < 1e-6:  # right on it: step away along the robot's own side
-                    offset = self._estimate(robot).position - position
-                    distance = float(np.linalg.norm(offset)) or 1.0
-                target, blocking, moved = position + clearance * offset / distance, peer, True
-            if not moved:
-                break
-        if blocking is None:
+        stop = None
+        if peers and self.params.clearance_m > 0:  # 0 turns keeping clear off
+            centres = [position for _, position in peers]
+            here = self._estimate(robot).position
+            stop = waiting_point(here, reference.position, centres, self.params.clearance_m)
+        agent.giving_way = stop is not None
+        if stop is None:
             if robot.yielding:
                 robot.yielding = False
                 self.writer.event(now, "clear", robot=robot.name)
             return reference
+        point, blocking = stop
         if not robot.yielding:
             robot.yielding = True
-            self.writer.event(now, "yielding", robot=robot.name, to=self.robots_by_index[blocking].name)
-        return PoseReference(target, np.zeros(3), np.zeros(3), reference.yaw, reference.yaw_rate)
+            self.writer.event(
+                now, "yielding", robot=robot.name, to=self.robots_by_index[peers[blocking][0]].name
+            )
+        return PoseReference(point, np.zeros(3), np.zeros(3), reference.yaw, reference.yaw_rate)
 
     def _lost(self, robot: _Robot, now: float) -> bool:
         """A robot without a DVL whose front end has had no visual fix for ``lost_after_s``, or whose

@@ -88,7 +88,7 @@ def interleaved_overhead(env_id: str, steps: int, block: int = 50) -> tuple[floa
 
 
 def team_rate(steps: int) -> float:
-    env = gymnasium.make("MapTidal/TeamInspection-v0")
+    env = gymnasium.make("MapTidal/TeamInspection-v1")
     env.reset(seed=0)
     action = {name: np.zeros(6, np.float32) for name in env.unwrapped.agents}
     start = time.perf_counter()
@@ -105,7 +105,7 @@ def interleaved_vector_gain(steps: int, block: int = 100) -> tuple[float, float,
     """Steps/s of an async vector of one and of two, measured in alternating blocks (median block
     times), and the ratio of two to one."""
     vectors = {
-        n: gymnasium.make_vec("MapTidal/GoToPose-v0", num_envs=n, vectorization_mode="async") for n in (1, 2)
+        n: gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, vectorization_mode="async") for n in (1, 2)
     }
     times: dict[int, list[float]] = {1: [], 2: []}
     for n, vec in vectors.items():
@@ -132,13 +132,13 @@ def main() -> None:
     print("| environment | images | env steps/s | wrapped work, steps/s | overhead (goal <= 1.3 / 1.1) |")
     print("|---|---|---|---|---|")
     steps = max(10, args.steps // 10)
-    for env_id in ("MapTidal/GoToPose-v0", "MapTidal/StationKeeping-v0", "MapTidal/TankInspection-v0"):
+    for env_id in ("MapTidal/GoToPose-v1", "MapTidal/StationKeeping-v1", "MapTidal/TankInspection-v1"):
         ours, bare, ratio = interleaved_overhead(env_id, args.steps)
         print(f"| {env_id} | none | {ours:.0f} | {bare:.0f} | {ratio:.2f} |")
         ours = env_rate(env_id, steps, obs_images="stereo", image_size=(400, 640))
         bare = bare_rate(env_id, steps, images=True)
         print(f"| {env_id} | stereo 640x400 | {ours:.1f} | {bare:.1f} | {bare / ours:.2f} |")
-    print(f"\nMapTidal/TeamInspection-v0, 2 robots: {team_rate(args.steps):.0f} steps/s")
+    print(f"\nMapTidal/TeamInspection-v1, 2 robots: {team_rate(args.steps):.0f} steps/s")
     one, two, gain = interleaved_vector_gain(args.steps)
     print(f"\nasync vector: 1 env {one:.0f} steps/s, 2 envs {two:.0f} steps/s", end=", ")
     print(f"ratio {gain:.2f} (goal >= 1.6)")
