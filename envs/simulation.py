@@ -22,6 +22,7 @@ mixer's input, while ``maptidal sim`` flies STABILIZE, as ArduSub pilots do.
 
 from __future__ import annotations
 
+import copy
 import functools
 import math
 import queue
@@ -232,6 +233,57 @@ class Simulation:
         self.wall_time_s = 0.0
         for robot, mode in self._flight_modes.items():
             self.set_flight_mode(robot, mode)
+
+    # what get_state copies besides MuJoCo's integration state: the noise generator and sensor biases,
+    # the flight modes and autopilots, the estimators, the last readings and thruster outputs
+    _STATE_ATTRIBUTES = (
+        "rng",
+        "_sensors",
+        "_flight_modes",
+        "_autopilots",
+        "_estimators",
+        "_readings",
+        "_thruster_outputs",
+        "_tracked",
+    )
+    STATE_VERSION = 1
+
+    def get_state(self) -> dict:
+        """Everything the simulation's future depends on, copied: MuJoCo's integration state
+        (``mj_getState``: time, positions, velocities, warm start, controls, applied forces and the
+        userdata that holds the water current and the thrusters' states) and the Python side (the noise
+        generator, sensor biases, flight modes with their autopilots' integrators, the estimators, the
+        last readings). :meth:`set_state` puts it back, on this simulation or another of the same
+        scenario, and the same commands then give the same trajectory, bit for bit."""
+        physics = np.empty(mujoco.mj_stateSize(self.model, mujoco.mjtState.mjSTATE_INTEGRATION))
+        mujoco.mj_getState(self.model, self.data, physics, mujoco.mjtState.mjSTATE_INTEGRATION)
+        return {
+            "version": self.STATE_VERSION,
+            "layout": self._state_layout(),
+            "physics": physics,
+            "python": copy.deepcopy({name: getattr(self, name) for name in self._STATE_ATTRIBUTES}),
+        }
+
+    def set_state(self, state: dict) -> None:
+        """Restore a :meth:`get_state`; a state from another version or another world (other robots,
+        another model size) raises ValueError and changes nothing."""
+        if not isinstance(state, dict) or state.get("version") != self.STATE_VERSION:
+            got = state.get("version") if isinstance(state, dict) else type(state).__name__
+            raise ValueError(f"a simulation state of version {self.STATE_VERSION} is needed, got {got!r}")
+        here = self._state_layout()
+        if state.get("layout") != here:
+            raise ValueError(f"the state is of another world: {state.get('layout')!r}, this one is {here!r}")
+        physics = np.asarray(state["physics"], float)
+        mujoco.mj_setState(self.model, self.data, physics, mujoco.mjtState.mjSTATE_INTEGRATION)
+        mujoco.mj_forward(self.model, self.data)
+        mujoco.mj_setState(self.model, self.data, physics, mujoco.mjtState.mjSTATE_INTEGRATION)
+        for name, value in copy.deepcopy(state["python"]).items():
+            setattr(self, name, value)
+
+    def _state_layout(self) -> tuple:
+        """What a state must match to be put back here: the robots and the model's sizes."""
+        m = self.model
+        return (tuple(self.robots), m.nq, m.nv, m.na, m.nu, m.nuserdata)
 
     def place(self, robot: str, position, yaw_rad: float = 0.0, quaternion=None) -> None:
         """Put ``robot`` at ``position`` (m, world) with heading ``yaw_rad`` (counter-clockwise from +x),

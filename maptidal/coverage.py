@@ -270,9 +270,18 @@ class SeenVoxels:
 
     def reset(self) -> None:
         """Nothing seen."""
-        self.seen = np.zeros(len(self.model.voxels), bool)
-        self._unseen = np.arange(len(self.model.voxels))
-        self._unseen_columns = self._columns.copy()
+        self.restore(np.zeros(len(self.model.voxels), bool))
+
+    def restore(self, seen: np.ndarray) -> None:
+        """Take up from a copy of an earlier ``seen`` (one flag per voxel), as if those had been seen."""
+        seen = np.array(seen, bool)
+        if seen.shape != (len(self.model.voxels),):
+            raise ValueError(
+                f"seen must hold one flag per voxel ({len(self.model.voxels)}), got {seen.shape}"
+            )
+        self.seen = seen
+        self._unseen = np.flatnonzero(~seen)
+        self._unseen_columns = np.ascontiguousarray(self._columns[:, self._unseen])
 
     def look(self, viewpoints: np.ndarray) -> int:
         """Add what the viewpoints ``(N, 6)`` see; returns the number of voxels newly seen."""

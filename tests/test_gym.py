@@ -482,3 +482,104 @@ def test_a_step_before_reset_or_after_the_episode_ended_raises():
         env.step(np.zeros(6, np.float32))  # a new episode steps again
     finally:
         env.close()
+
+
+# ----- reset options ------------------------------------------------------------------------------
+def test_reset_options_fix_the_start_the_target_and_the_current():
+    env = gymnasium.make("MapTidal/GoToPose-v1")
+    try:
+        fixed = {"pose": (-2.0, 0.2, 1.0, 0.0), "target": (-1.0, 0.2, 1.3, 0.5)}
+        observation, _ = env.reset(seed=3, options=fixed)
+        truth = env.unwrapped.sim.ground_truth(env.unwrapped.robot)
+        np.testing.assert_allclose(truth["position"], [-2.0, 0.2, 1.0], atol=1e-6)
+        # facing +x at the start: the target is 1 m ahead and 0.3 m up, 0.5 rad to the left
+        np.testing.assert_allclose(observation["target"], [1.0, 0.0, 0.3, 0.5], atol=0.02)
+    finally:
+        env.close()
+    env = gymnasium.make("MapTidal/StationKeeping-v1", turbulence_m_s=0.0)
+    try:
+        env.reset(seed=4, options={"pose": (-2.0, 0.0, 1.0, 0.0), "current": (0.0, 0.15, 0.0)})
+        for _ in range(30):
+            *_, info = env.step(np.zeros(6, np.float32))
+        assert info["current_m_s"] == [0.0, 0.15, 0.0]
+        drift = np.asarray(env.unwrapped.sim.ground_truth(env.unwrapped.robot)["position"]) - [-2.0, 0.0, 1.0]
+        assert drift[1] > 0.1 and abs(drift[0]) < 0.5 * drift[1]  # carried along +y, the current's way
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize(
+    ("env_id", "options", "message"),
+    [
+        ("MapTidal/TankInspection-v1", {"target": (-1.0, 0.0, 1.0, 0.0)}, "unknown reset option"),
+        ("MapTidal/GoToPose-v1", {"pose": (-1.0, 0.0, 1.0)}, "four finite numbers"),
+        ("MapTidal/GoToPose-v1", {"pose": (-1.0, 0.0, math.nan, 0.0)}, "four finite numbers"),
+        ("MapTidal/GoToPose-v1", {"pose": ("a", 0.0, 1.0, 0.0)}, "four finite numbers"),
+        ("MapTidal/GoToPose-v1", {"target": (-1.0, 0.0, 5.0, 0.0)}, "in the tank's water"),
+        ("MapTidal/GoToPose-v1", {"pose": (3.0, 0.0, 1.0, 0.0)}, "in the tank's water"),
+        ("MapTidal/StationKeeping-v1", {"current": (10.0, 0.0, 0.0)}, "beyond"),
+        ("MapTidal/StationKeeping-v1", {"current": "fast"}, "three finite numbers"),
+        ("MapTidal/TeamInspection-v1", {"pose": (-1.0, 0.0, 1.0, 0.0)}, "no reset options"),
+    ],
+)
+def test_bad_reset_options_are_refused_and_the_episode_goes_on(env_id, options, message):
+    env = gymnasium.make(env_id)
+    try:
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+        with pytest.raises(ValueError, match=message):
+            env.reset(seed=1, options=options)
+        env.step(env.action_space.sample())  # the episode under way was left as it was
+    finally:
+        env.close()
+
+
+# ----- state -------------------------------------------------------------------------------------
+def _replay(env, actions) -> np.ndarray:
+    rows = []
+    for action in actions:
+        observation, reward, *_ = env.step(action)
+        rows.append(np.r_[np.concatenate([np.ravel(v) for v in observation.values()]), reward])
+    return np.array(rows)
+
+
+@pytest.mark.parametrize(
+    "env_id", ["MapTidal/GoToPose-v1", "MapTidal/StationKeeping-v1", "MapTidal/TankInspection-v1"]
+)
+def test_a_saved_state_replays_the_trajectory_bit_for_bit_here_in_a_pickle_and_in_a_copy(env_id):
+    import copy
+    import pickle
+
+    actions = np.random.default_rng(1).uniform(-1, 1, (40, 6)).astype(np.float32)
+    env = gymnasium.make(env_id)
+    try:
+        env.reset(seed=5)
+        _replay(env, actions[:10])
+        state = env.unwrapped.get_state()
+        pickled, copied = pickle.loads(pickle.dumps(env)), copy.deepcopy(env)
+        first = _replay(env, actions[10:])
+        env.unwrapped.set_state(state)
+        np.testing.assert_array_equal(_replay(env, actions[10:]), first)  # the estimator and autopilot too
+        np.testing.assert_array_equal(_replay(pickled, actions[10:]), first)
+        np.testing.assert_array_equal(_replay(copied, actions[10:]), first)
+        pickled.close()
+        copied.close()
+    finally:
+        env.close()
+
+
+def test_a_state_of_another_task_or_version_is_refused():
+    go, hold = gymnasium.make("MapTidal/GoToPose-v1"), gymnasium.make("MapTidal/StationKeeping-v1")
+    try:
+        go.reset(seed=0)
+        hold.reset(seed=0)
+        state = go.unwrapped.get_state()
+        with pytest.raises(ValueError, match="GoToPoseEnv"):
+            hold.unwrapped.set_state(state)
+        with pytest.raises(ValueError, match="version"):
+            go.unwrapped.set_state({**state, "version": 0})
+        with pytest.raises(ValueError, match="version"):
+            go.unwrapped.sim.set_state({**state["sim"], "version": 99})
+    finally:
+        go.close()
+        hold.close()

@@ -7,6 +7,7 @@ its target, reward and termination are.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import os
@@ -20,7 +21,7 @@ import numpy as np
 from gymnasium import spaces
 
 from maptidal.controllers.estimation import rotation_from_rpy, wrap_angle
-from maptidal.envs.scenario import Scenario, load_scenario, with_frame
+from maptidal.envs.scenario import Scenario, check_current, inside_tank, load_scenario, with_frame
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.views import third_person_frame
 
@@ -120,6 +121,14 @@ class EpisodeState:
         return result
 
 
+def _numbers(value) -> bool:
+    """Whether ``value`` is a sequence of plain numbers (not strings, not booleans)."""
+    try:
+        return all(isinstance(v, int | float | np.number) and not isinstance(v, bool) for v in value)
+    except TypeError:
+        return False
+
+
 def _has_display() -> bool:
     # MuJoCo's viewer needs a window system; without one GLFW would abort the process
     return sys.platform != "linux" or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
@@ -135,6 +144,13 @@ class MapTidalEnv(gymnasium.Env):
         "render_modes": ["rgb_array", *(["human"] if _has_display() else [])],
         "render_fps": 10,
     }
+
+    def __new__(cls, *args, **kwargs):
+        # the constructor's arguments, kept so that a pickled or deep-copied environment is built anew
+        # and then given the state (__getstate__)
+        env = super().__new__(cls)
+        env._init_args = (args, kwargs)
+        return env
 
     def __init__(
         self,
@@ -186,8 +202,16 @@ class MapTidalEnv(gymnasium.Env):
     def _task_observation(self) -> dict[str, np.ndarray]:
         return {}
 
-    def _start_episode(self) -> None:
-        """Choose the start pose, targets and water for a new episode (uses self.np_random)."""
+    # the keys of reset(options=...) a task honours (MapTidalEnv.reset)
+    reset_options: ClassVar[tuple[str, ...]] = ("pose", "current")
+
+    def _start_episode(self, pose: tuple[np.ndarray, float] | None = None, **given) -> None:
+        """Choose the start pose (``pose`` when given: position, yaw), targets and water for a new
+        episode (uses self.np_random); ``given`` holds the task's other reset options."""
+
+    def _set_episode_current(self, current: np.ndarray) -> None:
+        """Hold the water current ``current`` (m/s, world frame) for the episode."""
+        self.sim.set_current(current)
 
     def _reward(self, truth: dict) -> tuple[float, bool, dict]:
         """(reward, terminated, info) after one step."""
@@ -196,13 +220,124 @@ class MapTidalEnv(gymnasium.Env):
     # ----- gymnasium API ----------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """Start an episode; ``seed`` seeds the start pose, targets, currents and all sensor and
-        camera noise."""
+        camera noise. ``options`` may fix what would be drawn (the task's ``reset_options``):
+
+        - ``"pose"``: the start, ``(x, y, z, yaw)`` in m and rad, in the tank's water at least half the
+          hull's length from walls, floor and surface;
+        - ``"target"`` (GoToPose, StationKeeping): the pose to reach or hold, the same way;
+        - ``"current"``: the water current for the episode, ``(vx, vy, vz)`` m/s (StationKeeping's
+          turbulence still blows about it).
+
+        Anything else, or a value out of range, raises ValueError before the episode changes."""
+        chosen = self._checked_reset_options(options)
         super().reset(seed=seed)
         self.sim.reset(seed=int(self.np_random.integers(2**31 - 1)))
         self._steps = 0
-        self._start_episode()  # placing the robot restarts the simulation's estimator there
+        current = chosen.pop("current", None)
+        self._start_episode(**chosen)  # placing the robot restarts the simulation's estimator there
+        if current is not None:
+            self._set_episode_current(current)
         self.episode.started()
         return self._observation(), {}
+
+    def _checked_reset_options(self, options: dict | None) -> dict:
+        """``reset``'s options, checked (its docstring), as arrays: pose and target as (position, yaw)."""
+        if options is None:
+            return {}
+        if not isinstance(options, dict):
+            raise ValueError(f"reset options must be a dict, got {type(options).__name__}")
+        unknown = sorted(set(options) - set(self.reset_options))
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {unknown}; this task takes {list(self.reset_options)}")
+        chosen: dict = {}
+        margin = max(self.vehicle.hull_size[:2]) / 2
+        for key in ("pose", "target"):
+            if key not in options:
+                continue
+            value = np.asarray(options[key], float) if _numbers(options[key]) else np.zeros(0)
+            if value.shape != (4,) or not np.isfinite(value).all():
+                raise ValueError(
+                    f"reset option {key!r} must be four finite numbers (x, y, z, yaw), got {options[key]!r}"
+                )
+            if not inside_tank(self.scenario.tank, value[:3], margin):
+                raise ValueError(
+                    f"reset option {key!r} must lie in the tank's water at least {margin:.2f} m from walls, "
+                    f"floor and surface, got {value[:3].tolist()}"
+                )
+            chosen[key] = (value[:3].copy(), float(value[3]))
+        if "current" in options:
+            if not _numbers(options["current"]):
+                got = options["current"]
+                raise ValueError(f"reset option 'current' is three finite numbers (m/s), got {got!r}")
+            chosen["current"] = check_current(options["current"], "reset option 'current'")
+        return chosen
+
+    # ----- state ------------------------------------------------------------------------------------
+    STATE_VERSION = 1
+    # the episode's bookkeeping a state carries besides the simulation's (tasks add their own in
+    # _task_state); those a task does not have are skipped
+    _STATE_ATTRIBUTES = (
+        "_steps",
+        "_energy",
+        "_contact_s",
+        "target",
+        "target_yaw",
+        "_previous",
+        "mean_current",
+        "gust",
+    )
+
+    def get_state(self) -> dict:
+        """The whole state of the episode, copied: the simulation's (:meth:`Simulation.get_state`: the
+        physics, sensor noise, flight mode, autopilot and estimator), the task's (target, current, what
+        has been seen, the step count) and the environment's random generator. :meth:`set_state` on
+        this environment or another made with the same arguments then replays the same actions to the
+        same observations and rewards, bit for bit."""
+        return {
+            "version": self.STATE_VERSION,
+            "task": type(self).__name__,
+            "sim": self.sim.get_state(),
+            "episode": copy.deepcopy(
+                {name: getattr(self, name) for name in self._STATE_ATTRIBUTES if hasattr(self, name)}
+            ),
+            "task_state": self._task_state(),
+            "ended": self.episode.ended,
+            "np_random": copy.deepcopy(self.np_random.bit_generator.state),
+        }
+
+    def set_state(self, state: dict) -> None:
+        """Restore a :meth:`get_state`; one from another version or task raises ValueError first."""
+        if not isinstance(state, dict) or state.get("version") != self.STATE_VERSION:
+            got = state.get("version") if isinstance(state, dict) else type(state).__name__
+            raise ValueError(f"an environment state of version {self.STATE_VERSION} is needed, got {got!r}")
+        if state.get("task") != type(self).__name__:
+            raise ValueError(
+                f"the state is of {state.get('task')!r}, this environment is {type(self).__name__}"
+            )
+        self.sim.set_state(state["sim"])
+        for name, value in copy.deepcopy(state["episode"]).items():
+            setattr(self, name, value)
+        self._set_task_state(state["task_state"])
+        self.episode.ended = state["ended"]
+        self.np_random.bit_generator.state = copy.deepcopy(state["np_random"])
+
+    def _task_state(self) -> dict:
+        """The task's own state beyond ``_STATE_ATTRIBUTES``, copied."""
+        return {}
+
+    def _set_task_state(self, state: dict) -> None:
+        """Restore :meth:`_task_state`."""
+
+    def __getstate__(self) -> dict:
+        started = self.episode.ended != "never started"
+        return {"init": self._init_args, "state": self.get_state() if started else None}
+
+    def __setstate__(self, saved: dict) -> None:
+        args, kwargs = saved["init"]
+        self.__init__(*args, **kwargs)
+        self._init_args = (args, kwargs)
+        if saved["state"] is not None:
+            self.set_state(saved["state"])
 
     @property
     def _estimate(self):
@@ -347,6 +482,8 @@ YAW_TOLERANCE_RAD = math.radians(5.0)
 class PoseTargetEnv(MapTidalEnv):
     """A task with a pose to reach or hold (``self.target``, ``self.target_yaw``, set by
     ``_start_episode``): the observation adds ``target``, as the robot estimates it."""
+
+    reset_options: ClassVar[tuple[str, ...]] = ("pose", "target", "current")
 
     def _task_spaces(self) -> dict[str, spaces.Space]:
         return {"target": spaces.Box(-np.inf, np.inf, (4,), np.float32)}

@@ -65,6 +65,8 @@ class GoToPoseEnv(PoseTargetEnv):
 
     A random pose in the tank's safe box (x in [-3.0, -0.8] m, y in [-0.8, 0.8] m, z in [0.5, 1.5] m,
     any yaw), at rest; the target is a random pose 0.5 to 1.5 m away inside the same box.
+    ``reset(options={"pose": (x, y, z, yaw), "target": (x, y, z, yaw), "current": (vx, vy, vz)})`` fixes
+    any of them instead (each checked: in the tank's water, a current of at most 5 m/s).
 
     ## Episode end
 
@@ -84,20 +86,20 @@ class GoToPoseEnv(PoseTargetEnv):
     - v0: first version (maptidal 0.1).
     """
 
-    def _start_episode(self) -> None:
-        start, yaw = self._sample_pose()
+    def _start_episode(self, pose=None, target=None) -> None:
+        start, yaw = pose if pose is not None else self._sample_pose()
         self.sim.place(self.robot, start, yaw)
         low, high = SAFE_BOX
         for _ in range(100):
             offset = self.np_random.normal(size=3)
             offset *= self.np_random.uniform(0.5, 1.5) / np.linalg.norm(offset)
-            target = start + offset
-            if np.all(target >= low) and np.all(target <= high):
+            drawn = start + offset
+            if np.all(drawn >= low) and np.all(drawn <= high):
                 break
         else:
-            target = np.clip(start + offset, low, high)
-        self.target = target
-        self.target_yaw = float(self.np_random.uniform(-math.pi, math.pi))
+            drawn = np.clip(start + offset, low, high)
+        drawn_yaw = float(self.np_random.uniform(-math.pi, math.pi))  # drawn anyway: the same stream
+        self.target, self.target_yaw = target if target is not None else (drawn, drawn_yaw)
         self._previous = self._target_errors(self.sim.ground_truth(self.robot))[:2]
 
     def _reward(self, truth: dict) -> tuple[float, bool, dict]:

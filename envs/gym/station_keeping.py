@@ -39,10 +39,11 @@ class StationKeepingEnv(PoseTargetEnv):
 
     ## Starting state
 
-    A random pose in the tank's safe box, at rest, which is also the pose to hold. The episode's current
-    is horizontal, of a random direction and a speed drawn from [0, ``max_current_m_s``] (default
-    0.2 m/s); turbulence adds an Ornstein-Uhlenbeck gust on each axis with standard deviation
-    ``turbulence_m_s`` (default 0.03 m/s) and a 2 s time constant.
+    A random pose in the tank's safe box, at rest, which is also the pose to hold; ``reset(options=...)``
+    may fix the ``pose``, a ``target`` elsewhere, and the ``current`` (MapTidalEnv.reset). The
+    episode's current is horizontal, of a random direction and a speed drawn from
+    [0, ``max_current_m_s``] (default 0.2 m/s); turbulence adds an Ornstein-Uhlenbeck gust on each
+    axis with standard deviation ``turbulence_m_s`` (default 0.03 m/s) and a 2 s time constant.
 
     ## Episode end
 
@@ -69,15 +70,19 @@ class StationKeepingEnv(PoseTargetEnv):
         self.max_current_m_s, self.turbulence_m_s = max_current_m_s, turbulence_m_s
         super().__init__(*args, **kwargs)
 
-    def _start_episode(self) -> None:
-        start, yaw = self._sample_pose()
+    def _start_episode(self, pose=None, target=None) -> None:
+        start, yaw = pose if pose is not None else self._sample_pose()
         self.sim.place(self.robot, start, yaw)
-        self.target, self.target_yaw = start, yaw
+        self.target, self.target_yaw = target if target is not None else (start, yaw)
         heading = self.np_random.uniform(-math.pi, math.pi)
         speed = self.np_random.uniform(0.0, self.max_current_m_s)
         self.mean_current = speed * np.array([math.cos(heading), math.sin(heading), 0.0])
         self.gust = np.zeros(3)
         self.sim.set_current(self.mean_current)
+
+    def _set_episode_current(self, current: np.ndarray) -> None:
+        self.mean_current = np.asarray(current, float)  # the turbulence blows about it
+        self.sim.set_current(self.mean_current + self.gust)
 
     def _before_substep(self) -> None:
         if self.turbulence_m_s <= 0:

@@ -50,6 +50,11 @@ class WallCoverage:
         self._tracker.reset()
         self._summary: np.ndarray | None = None
 
+    def restore(self, seen: np.ndarray) -> None:
+        """Take up from a copy of an earlier :attr:`seen`."""
+        self._tracker.restore(seen)
+        self._summary = None
+
     def look(self, viewpoints: np.ndarray) -> int:
         """Count what the viewpoints ``(N, 6)`` see; the number of voxels newly seen."""
         newly = self._tracker.look(viewpoints)
@@ -93,8 +98,9 @@ class TankInspectionEnv(MapTidalEnv):
 
     ## Starting state
 
-    A random position in the tank's safe box, facing the end wall within +-60 deg, at rest; what the
-    camera sees there counts as seen.
+    A random position in the tank's safe box, facing the end wall within +-60 deg, at rest (or the
+    ``pose`` of ``reset(options=...)``, with a ``current`` too: MapTidalEnv.reset); what the camera sees
+    there counts as seen.
 
     ## Episode end
 
@@ -131,13 +137,21 @@ class TankInspectionEnv(MapTidalEnv):
             return {"coverage": np.zeros(SECTORS + 1)}
         return {"coverage": self.walls.summary()}
 
+    def _task_state(self) -> dict:
+        return {"seen": self.walls.seen.copy()}
+
+    def _set_task_state(self, state: dict) -> None:
+        self.walls.restore(state["seen"])
+
     def _look(self, truth: dict) -> int:
         return self.walls.look(camera_viewpoint(truth, self.vehicle.sensors.camera_position)[None, :])
 
-    def _start_episode(self) -> None:
+    def _start_episode(self, pose=None) -> None:
         low, high = SAFE_BOX
         start = self.np_random.uniform(low, high)
         yaw = float(self.np_random.uniform(-math.pi / 3, math.pi / 3))
+        if pose is not None:
+            start, yaw = pose
         self.sim.place(self.robot, start, yaw)
         self.walls.reset()
         self._look(self.sim.ground_truth(self.robot))

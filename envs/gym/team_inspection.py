@@ -168,7 +168,10 @@ class TeamInspectionEnv(gymnasium.Env):
         }
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        """Start an episode (``seed`` seeds poses and all noise)."""
+        """Start an episode (``seed`` seeds poses and all noise). This task takes no ``options`` yet,
+        and says so rather than ignore them."""
+        if options:
+            raise ValueError(f"MapTidal/TeamInspection takes no reset options yet, got {sorted(options)}")
         super().reset(seed=seed)
         self.sim.reset(seed=int(self.np_random.integers(2**31 - 1)))
         self._steps = 0
