@@ -583,3 +583,26 @@ def test_a_state_of_another_task_or_version_is_refused():
     finally:
         go.close()
         hold.close()
+
+
+def test_the_pettingzoo_adapter_renders_and_gives_the_global_state():
+    from maptidal.envs.gym.team_inspection import parallel_env
+
+    env = parallel_env(n_robots=2, render_mode="rgb_array")
+    try:
+        env.reset(seed=3)
+        state = env.state()
+        assert state.shape == env.state_space.shape == (2 * 12 + 9,) and state.dtype == np.float32
+        for k, agent in enumerate(env.possible_agents):
+            truth = env.env.sim.ground_truth(agent)
+            np.testing.assert_allclose(state[12 * k : 12 * k + 3], truth["position"], atol=1e-5)
+            np.testing.assert_allclose(state[12 * k + 3 : 12 * k + 6], truth["rpy"], atol=1e-5)
+        np.testing.assert_allclose(state[24:], env.env.walls.summary(), atol=1e-6)
+        surge = np.array([1, 0, 0, 0, 0, 0], np.float32)
+        for _ in range(10):
+            env.step(dict.fromkeys(env.agents, surge))
+        assert not np.allclose(env.state()[:3], state[:3])  # the robots moved, and the state with them
+        image = env.render()
+        assert image.ndim == 3 and image.shape[2] == 3 and image.dtype == np.uint8 and image.std() > 0
+    finally:
+        env.close()

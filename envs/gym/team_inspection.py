@@ -349,14 +349,36 @@ def parallel_env(**kwargs):
     from pettingzoo import ParallelEnv
 
     class TeamInspectionParallel(ParallelEnv):
-        """PettingZoo view of :class:`TeamInspectionEnv` (same arguments)."""
+        """PettingZoo view of :class:`TeamInspectionEnv` (same arguments). ``render()`` is the team
+        environment's (``render_mode="rgb_array"``); ``state()`` is the global state a centralised
+        critic may use: each robot's true pose (x, y, z, roll, pitch, yaw) and body velocity (u, v, w,
+        p, q, r), in agent order, then the team's share of the walls seen, overall and per sector."""
 
-        metadata = {"name": "maptidal_team_inspection_v0", "render_modes": []}  # noqa: RUF012
+        metadata = {"name": "maptidal_team_inspection_v1", "render_modes": ["rgb_array"]}  # noqa: RUF012
 
-        def __init__(self, **options) -> None:
-            self.env = TeamInspectionEnv(**options)
+        def __init__(self, render_mode: str | None = None, **options) -> None:
+            self.env = TeamInspectionEnv(render_mode=render_mode, **options)
+            self.render_mode = render_mode
             self.possible_agents = list(self.env.agents)
             self.agents: list[str] = []
+            size = 12 * len(self.possible_agents) + SECTORS + 1
+            self.state_space = spaces.Box(-np.inf, np.inf, (size,), np.float32)
+
+        def render(self):
+            return self.env.render()
+
+        def state(self) -> np.ndarray:
+            parts = []
+            for agent in self.possible_agents:
+                truth = self.env.sim.ground_truth(agent)
+                parts += [
+                    truth["position"],
+                    truth["rpy"],
+                    truth["velocity_body"],
+                    truth["angular_velocity_body"],
+                ]
+            parts.append(self.env.walls.summary())
+            return np.concatenate([np.asarray(p, float) for p in parts]).astype(np.float32)
 
         def observation_space(self, agent: str):
             return self.env.observation_space[agent]
@@ -365,7 +387,11 @@ def parallel_env(**kwargs):
             return self.env.action_space[agent]
 
         def reset(self, seed: int | None = None, options: dict | None = None):
-            observations, _ = self.env.reset(seed=seed, options=options)
+            # PettingZoo's API test passes options no task knows and expects them taken: the team task
+            # takes none yet, so they are left out, with a warning, rather than refused
+            if options:
+                gymnasium.logger.warn(f"TeamInspection takes no reset options yet; ignored {sorted(options)}")
+            observations, _ = self.env.reset(seed=seed)
             self.agents = list(self.possible_agents)
             return observations, {agent: {} for agent in self.agents}
 
