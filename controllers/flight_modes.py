@@ -2,7 +2,8 @@
 
 The pilot's normalised 6-DOF command (:mod:`maptidal.controllers.convention`) goes in, the mixer's input comes
 out, so one pilot input behaves alike in the simulator and on a vehicle. The command is the pilot's stick
-as ArduSub's RC channels carry it: MANUAL_CONTROL / 1000, after ArduSub's pilot gain.
+as ArduSub's RC channels carry it: MANUAL_CONTROL / 1000 after ArduSub's pilot gain, which the
+simulator applies first (:class:`maptidal.controllers.convention.PilotGain`, ``ModeParams.pilot_gain``).
 
 We follow ArduPilot master (ArduSub 4.7.0-dev; the 4.5 behaviour of the depth hold):
 ``ArduSub/mode_stabilize.cpp``, ``ArduSub/mode_althold.cpp``, ``ArduSub/Attitude.cpp``
@@ -57,6 +58,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .convention import PilotGain
 from .estimation import StateEstimate, wrap_angle
 from .pid import ACPID, ACPIDGains, sqrt_controller
 from .position_control import HorizontalPositionControl, PosControlGains, VerticalPositionControl
@@ -101,6 +103,10 @@ class ModeParams:
     # PWM, which the T200's deadband and bend soften (module docstring)
     linearise_thrust: bool = True
     position: PosControlGains = field(default_factory=PosControlGains)
+    # the pilot gain a MANUAL_CONTROL stick is scaled by (JS_GAIN and JS_THR_GAIN; PilotGain). 1, not
+    # ArduSub's 0.5 default, so that a full command is full authority; a vehicle flown with the gain
+    # at 0.5 is matched by PilotGain(0.5)
+    pilot_gain: PilotGain = field(default_factory=PilotGain)
 
     def __post_init__(self) -> None:
         for name in ("max_lean_deg", "max_yaw_rate_deg_s"):

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from maptidal.controllers.convention import PilotGain, boot_gain
 from maptidal.controllers.estimation import DeadReckoning, EstimatorParams, rotation_from_rpy
 from maptidal.controllers.mavlink_wire import (
     ARDUSUB_MODES,
@@ -110,6 +111,15 @@ PARAMETERS: dict[str, float] = {
     "ATC_RAT_YAW_P": 0.18,
     "ATC_RAT_YAW_I": 0.018,
     "ATC_RAT_YAW_D": 0.0,
+    # the joystick gain (ArduSub's JS_* parameters; maptidal.controllers.convention.PilotGain). ArduSub's
+    # JS_GAIN_DEFAULT is 0.5; the simulated vehicle starts at 1 (SimVehicleParams.pilot_gain), so that a
+    # full MANUAL_CONTROL stick is the simulator's full pilot command. As on ArduSub, the gain is taken
+    # from these at start; setting them later changes the table, not the live gain
+    "JS_GAIN_DEFAULT": 0.5,
+    "JS_GAIN_MIN": 0.25,
+    "JS_GAIN_MAX": 1.0,
+    "JS_GAIN_STEPS": 4.0,
+    "JS_THR_GAIN": 1.0,
 }
 
 
@@ -122,11 +132,14 @@ class SimVehicleParams:
     """The endpoint's MAVLink ids, pacing and message rates (Hz).
 
     speedup: simulated seconds per wall-clock second (1 = real time); the loop sleeps to keep it.
+    pilot_gain: the JS_GAIN_DEFAULT the vehicle starts with (0.1 to 1.0).
     """
 
     system_id: int = 1
     component_id: int = 1
     speedup: float = 1.0
+    # JS_GAIN_DEFAULT at start (ArduSub's default 0.5 gives half the thrust at full stick)
+    pilot_gain: float = 1.0
     rates_hz: dict[str, float] = field(
         default_factory=lambda: {
             "HEARTBEAT": 1.0,
@@ -142,6 +155,7 @@ class SimVehicleParams:
     def __post_init__(self) -> None:
         if not (self.speedup > 0 and math.isfinite(self.speedup)):
             raise ValueError(f"speedup must be a positive number, got {self.speedup!r}")
+        PilotGain(self.pilot_gain)  # ArduSub's bounds, or a ValueError
 
 
 @dataclass
@@ -180,6 +194,12 @@ class SimVehicle:
         self.parameters = dict(PARAMETERS)
         spec = sim.scenario.robots[sim.robots.index(self.robot)]
         self.parameters["FRAME_CONFIG"] = 2.0 if spec.vehicle.ardusub_frame == "vectored_6dof" else 1.0
+        self.parameters["JS_GAIN_DEFAULT"] = float(self.params.pilot_gain)
+        js = self.parameters
+        self.pilot_gain = PilotGain(
+            boot_gain(js["JS_GAIN_DEFAULT"], js["JS_GAIN_MIN"], js["JS_GAIN_MAX"], int(js["JS_GAIN_STEPS"])),
+            js["JS_THR_GAIN"],
+        )
         self.has_dvl = "dvl" in spec.sensors
         self.armed = False
         self.mode = "manual"
@@ -316,7 +336,10 @@ class SimVehicle:
             return
         if not manual_control_in_range(m.x, m.y, m.z, m.r):
             self.counters.clamped_pilot_messages += 1
-        self.pilot[[0, 1, 2, 5]] = [surge, sway, heave, yaw]
+        # ArduSub's joystick-to-RC step: the sticks times the pilot gain (PilotGain); the flight modes read
+        # the channels, so the simulation itself runs at gain 1
+        channels = self.pilot_gain.apply(np.array([surge, sway, heave, 0.0, 0.0, yaw]))
+        self.pilot[[0, 1, 2, 5]] = channels[[0, 1, 2, 5]]
         self._last_pilot_s = self.sim.time
         if self.pilot_failsafe:
             self.pilot_failsafe = False

@@ -409,8 +409,8 @@ class Simulation:
     def thruster_commands(self, robot: str, command, mode: str = "pilot") -> np.ndarray:
         """The per-thruster commands in [-1, 1] that ``command`` gives for ``robot``."""
         n = self._specs[robot].vehicle.n_thrusters
-        if mode == "pilot":
-            return mix(pilot_command(command), self._mixers[robot])
+        if mode == "pilot":  # MANUAL: the stick, after ArduSub's pilot gain, to the mixer
+            return mix(self.mode_params.pilot_gain.apply(pilot_command(command)), self._mixers[robot])
         if mode == "thrusters":
             values = np.asarray(command, float)
             if values.shape != (n,) or not np.all(np.isfinite(values)):
@@ -443,7 +443,7 @@ class Simulation:
             if robot not in self._slots:
                 raise KeyError(f"unknown robot {robot!r}; robots: {', '.join(self.robots)}")
             if robot in self._autopilots and mode == "pilot":
-                self._autopilots[robot].pilot = pilot_command(command)
+                self._autopilots[robot].pilot = self.mode_params.pilot_gain.apply(pilot_command(command))
                 continue
             self._drive(robot, self.thruster_commands(robot, command, mode))
         for robot, autopilot in self._autopilots.items():

@@ -20,7 +20,9 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
+from maptidal.controllers.convention import PilotGain
 from maptidal.controllers.estimation import rotation_from_rpy, wrap_angle
+from maptidal.controllers.flight_modes import FLIGHT_MODES, ModeParams
 from maptidal.envs.scenario import Scenario, check_current, inside_tank, load_scenario, with_frame
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.views import third_person_frame
@@ -52,6 +54,13 @@ class EnvOptions:
     control_period_s: float = 0.1
     episode_s: float = 20.0
     frame: str = "heavy"
+    # ArduSub's pilot gain (JS_GAIN; maptidal.controllers.convention.PilotGain): 1 makes an action of 1
+    # full authority, as on a vehicle whose gain the bridge has set to 1; 0.5 matches ArduSub's default
+    pilot_gain: float = 1.0
+    # the ArduSub flight mode a pilot action is flown in (maptidal.controllers.flight_modes): "stabilize"
+    # (None: the default), "manual", "alt_hold" (the heave stick a climb rate) or "poshold" (needs a
+    # DVL); with action="thrusters" there is none: the commands go straight to the thrusters
+    flight_mode: str | None = None
 
     def __post_init__(self) -> None:
         if self.action not in ACTIONS:
@@ -78,6 +87,23 @@ class EnvOptions:
             )
         if self.frame not in ("heavy", "standard"):
             raise ValueError(f"frame must be 'heavy' or 'standard', got {self.frame!r}")
+        if self.flight_mode is not None and self.flight_mode not in FLIGHT_MODES:
+            raise ValueError(f"flight_mode must be one of {FLIGHT_MODES}, got {self.flight_mode!r}")
+        if self.action == "thrusters" and self.flight_mode is not None:
+            raise ValueError('action="thrusters" drives the thrusters directly: it takes no flight_mode')
+        if isinstance(self.pilot_gain, bool) or not (
+            isinstance(self.pilot_gain, int | float) and 0.1 <= self.pilot_gain <= 1.0
+        ):
+            raise ValueError(
+                f"pilot_gain must be a number in [0.1, 1.0] (ArduSub's bounds), got {self.pilot_gain!r}"
+            )
+
+    def simulation(self, scenario: Scenario) -> Simulation:
+        """The simulation these options fly: the pilot action through ``flight_mode`` (STABILIZE unless
+        given) at ``pilot_gain``, or the thrusters directly (MANUAL)."""
+        mode = (self.flight_mode or "stabilize") if self.action == "pilot" else "manual"
+        modes = ModeParams(pilot_gain=PilotGain(float(self.pilot_gain)))
+        return Simulation(scenario, flight_mode=mode, mode_params=modes)
 
     @classmethod
     def checked(cls, options: dict, also: tuple[str, ...] = ()) -> EnvOptions:
@@ -171,8 +197,7 @@ class MapTidalEnv(gymnasium.Env):
         self.render_mode = render_mode
         base = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         self.scenario = with_frame(base, self.options.frame)
-        flight_mode = "stabilize" if self.options.action == "pilot" else "manual"
-        self.sim = Simulation(self.scenario, flight_mode=flight_mode)
+        self.sim = self.options.simulation(self.scenario)
         self.robot = self.sim.robots[0]
         spec = self.scenario.robots[0]
         self.vehicle = spec.vehicle

@@ -15,7 +15,8 @@ class GoToPoseEnv(PoseTargetEnv):
     ## Action space
 
     ``Box(-1, 1, (6,), float32)``: the normalised pilot command of ``controllers/convention.py``, flown
-    through ArduSub's STABILIZE (the default ``action="pilot"``):
+    through ArduSub's STABILIZE (the default ``action="pilot"``; ``flight_mode`` picks another, below).
+    Actions outside the box are clipped to it, as Gymnasium expects; NaN or infinite ones raise:
 
     | index | axis | +1 means |
     |---|---|---|
@@ -27,7 +28,8 @@ class GoToPoseEnv(PoseTargetEnv):
     | 5 | yaw | turn right (STABILIZE: 151.9 deg/s, ACRO_YAW_P x 45 deg) |
 
     ``action="thrusters"``: ``Box(-1, 1, (n,))``, one command per thruster (8 on the Heavy, 6 on the
-    standard frame), in ArduSub's motor order, straight to the thrusters (MANUAL).
+    standard frame), in ArduSub's motor order, straight to the thrusters: no flight mode, no mixer and
+    no pilot gain (a vehicle takes these as servo outputs, not as MANUAL_CONTROL).
 
     ## Observation space
 
@@ -78,7 +80,10 @@ class GoToPoseEnv(PoseTargetEnv):
 
     ``gymnasium.make("MapTidal/GoToPose-v1", action="pilot", flat_obs=False, obs_images=None,
     image_size=(80, 128), control_period_s=0.1, episode_s=20.0, frame="heavy", scenario=None,
-    render_mode=None)``.
+    render_mode=None, pilot_gain=1.0, flight_mode=None)``. ``flight_mode``: the ArduSub mode a pilot
+    action is flown in, "stabilize" (the default), "manual", "alt_hold" (heave a climb rate) or
+    "poshold" (needs a DVL). ``pilot_gain``: ArduSub's JS_GAIN, which scales surge, sway, heave and yaw
+    as MANUAL_CONTROL is scaled on a vehicle (1: full authority at 1; ArduSub's default is 0.5).
 
     ## Version history
 

@@ -17,7 +17,6 @@ from maptidal.controllers.task import TaskExecutor, TaskParams
 from maptidal.envs.gym.core import CONTACT_COST_PER_S, SAFE_BOX, EnvOptions, EpisodeState
 from maptidal.envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
 from maptidal.envs.scenario import Scenario, load_scenario, with_frame
-from maptidal.envs.simulation import Simulation
 from maptidal.envs.views import third_person_frame
 
 MAX_ROBOTS = 4
@@ -122,8 +121,7 @@ class TeamInspectionEnv(gymnasium.Env):
             for k in range(n_robots)
         )
         self.scenario = dataclasses.replace(base, robots=robots)
-        flight_mode = "stabilize" if self.options.action == "pilot" else "manual"
-        self.sim = Simulation(self.scenario, flight_mode=flight_mode)
+        self.sim = self.options.simulation(self.scenario)
         self.agents = list(self.sim.robots)
         self.vehicle = template.vehicle
         self.substeps = max(1, round(self.options.control_period_s / self.scenario.control_period_s))

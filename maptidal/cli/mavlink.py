@@ -24,6 +24,14 @@ RATED_DEPTH_M = 100.0
 LINK_SCHEMES = ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin")
 
 
+def pilot_gain(text: str) -> float:
+    """An argparse type: a pilot gain within ArduSub's bounds, 0.1 to 1.0."""
+    value = finite_float(text)
+    if not 0.1 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"a pilot gain is 0.1 to 1.0 (ArduSub's bounds), got {text}")
+    return value
+
+
 def connection_string(text: str) -> str:
     """An argparse type: a pymavlink address, SCHEME:HOST:PORT with a scheme of :data:`LINK_SCHEMES`
     and a port from 1 to 65535, or a serial device path (``/dev/ttyACM0`` or ``/dev/ttyACM0,115200``)."""
@@ -119,6 +127,14 @@ def register(commands) -> None:
     )
     vehicle.add_argument("--robot", metavar="NAME", help="which robot of the scenario (default: the first)")
     vehicle.add_argument("--speedup", type=positive_float, default=1.0, metavar="K", help="sim s per wall s")
+    vehicle.add_argument(
+        "--pilot-gain",
+        type=pilot_gain,
+        default=1.0,
+        metavar="G",
+        help="JS_GAIN_DEFAULT at start, 0.1 to 1.0 (default %(default)s; ArduSub's own default is 0.5, which "
+        "halves what a full MANUAL_CONTROL stick asks of the thrusters)",
+    )
     vehicle.add_argument("--duration", type=positive_float, metavar="S", help="stop after S simulated s")
     vehicle.add_argument(
         "--signing-key-file", metavar="FILE", help="MAVLink 2 signing key (or $MAPTIDAL_MAVLINK_KEY)"
@@ -337,7 +353,13 @@ def run_sim_vehicle(args: argparse.Namespace) -> int:
         from maptidal.envs.mavlink_vehicle import SimVehicle, SimVehicleParams, VehicleEndpointError
 
         key = load_signing_key(args.signing_key_file)
-        server = SimVehicle(sim, args.robot, args.connect, SimVehicleParams(speedup=args.speedup), key)
+        server = SimVehicle(
+            sim,
+            args.robot,
+            args.connect,
+            SimVehicleParams(speedup=args.speedup, pilot_gain=args.pilot_gain),
+            key,
+        )
         try:
             server.open()
         except VehicleEndpointError as error:

@@ -23,8 +23,9 @@ def register(commands) -> None:
         help="run the MuJoCo world headless with a constant pilot command",
         description="Load a scenario, hold a normalised 6-DOF pilot command (surge, sway, heave, roll, "
         "pitch, yaw, each in [-1, 1], ArduSub's meaning: forward, right, up, right side down, nose up, "
-        "turn right) on every robot for the duration, and report each robot's final ground-truth state, "
-        "the contacts it made and the run's speed.",
+        "turn right) on every robot for the duration, flown in an ArduSub flight mode (--mode, STABILIZE "
+        "by default) after ArduSub's pilot gain (--pilot-gain), and report each robot's final "
+        "ground-truth state, the contacts it made and the run's speed.",
     )
     sim.add_argument("--scenario", metavar="FILE", help="scenario TOML (default: the bundled default.toml)")
     sim.add_argument(
@@ -58,6 +59,20 @@ def register(commands) -> None:
         default="auto",
         help="where the underwater image model runs: a GL shader, the CPU, or auto (GL on a GPU, "
         "CPU on a software rasteriser; default %(default)s)",
+    )
+    sim.add_argument(
+        "--mode",
+        choices=("manual", "stabilize", "alt_hold", "poshold"),
+        default="stabilize",
+        help="the ArduSub flight mode the command is flown in (default %(default)s; poshold needs a DVL)",
+    )
+    sim.add_argument(
+        "--pilot-gain",
+        type=positive_float,
+        default=1.0,
+        metavar="G",
+        help="ArduSub's joystick gain JS_GAIN, 0.1 to 1.0, on surge, sway, heave and yaw (default "
+        "%(default)s; ArduSub's own default is 0.5)",
     )
     sim.add_argument("--seed", type=int, default=0, help="noise seed (default %(default)s)")
     sim.add_argument("--json", action="store_true", help="print the result as JSON")
@@ -116,7 +131,8 @@ def run_sim(args: argparse.Namespace) -> int:
     """Handler of ``maptidal sim``."""
     import cv2
 
-    from maptidal.controllers.convention import parse_command
+    from maptidal.controllers.convention import PilotGain, parse_command
+    from maptidal.controllers.flight_modes import ModeParams
     from maptidal.envs.scenario import load_scenario, with_frame
     from maptidal.envs.simulation import Simulation, SimulationError
 
@@ -127,7 +143,8 @@ def run_sim(args: argparse.Namespace) -> int:
     if args.duration > MAX_DURATION_S:
         raise ValueError(f"--duration must be at most {MAX_DURATION_S:g} s, got {args.duration:g}")
     period = scenario.substeps * scenario.timestep_s
-    sim = Simulation(scenario, water_backend=args.water_backend)
+    gain = ModeParams(pilot_gain=PilotGain(args.pilot_gain))  # ArduSub's bounds, or a ValueError
+    sim = Simulation(scenario, water_backend=args.water_backend, flight_mode=args.mode, mode_params=gain)
     sim.reset(seed=args.seed)
     if args.render_dir:
         try:
@@ -167,6 +184,8 @@ def run_sim(args: argparse.Namespace) -> int:
         "steps_per_s": physics_steps / sim.wall_time_s if sim.wall_time_s > 0 else float("inf"),
         "realtime_factor": sim.time / wall if wall > 0 else float("inf"),
         "hydrodynamics": sim.backend,
+        "flight_mode": args.mode,
+        "pilot_gain": args.pilot_gain,
     }
     if render_dir:
         result["water_backend"] = sim.water_backend
