@@ -606,3 +606,47 @@ def test_the_pettingzoo_adapter_renders_and_gives_the_global_state():
         assert image.ndim == 3 and image.shape[2] == 3 and image.dtype == np.uint8 and image.std() > 0
     finally:
         env.close()
+
+
+def _flat(value) -> np.ndarray:
+    if isinstance(value, dict):
+        return np.concatenate([_flat(value[key]) for key in sorted(value)])
+    return np.ravel(np.asarray(value, float))
+
+
+@pytest.mark.parametrize("action_kind", ["pilot", "tasks"])
+def test_the_team_replays_from_a_saved_state_bit_for_bit_here_in_a_pickle_and_in_a_copy(action_kind):
+    import copy
+    import pickle
+
+    options = {"action": "tasks"} if action_kind == "tasks" else {}
+    env = gymnasium.make("MapTidal/TeamInspection-v1", **options)
+    rng = np.random.default_rng(2)
+    names = env.unwrapped.agents
+    if action_kind == "tasks":
+        actions = [{name: int(rng.integers(len(env.unwrapped.tasks))) for name in names} for _ in range(4)]
+    else:
+        actions = [{name: rng.uniform(-1, 1, 6).astype(np.float32) for name in names} for _ in range(30)]
+
+    def rollout(target, steps):
+        rows = []
+        for action in steps:
+            observation, reward, *_ = target.step(action)
+            rows.append(np.r_[_flat(observation), reward])
+        return np.array(rows)
+
+    try:
+        env.reset(seed=6)
+        rollout(env, actions[:1] if action_kind == "tasks" else actions[:10])
+        state = env.unwrapped.get_state()
+        pickled, copied = pickle.loads(pickle.dumps(env)), copy.deepcopy(env)
+        rest = actions[1:3] if action_kind == "tasks" else actions[10:]
+        first = rollout(env, rest)
+        env.unwrapped.set_state(state)
+        np.testing.assert_array_equal(rollout(env, rest), first)
+        np.testing.assert_array_equal(rollout(pickled, rest), first)
+        np.testing.assert_array_equal(rollout(copied, rest), first)
+        pickled.close()
+        copied.close()
+    finally:
+        env.close()

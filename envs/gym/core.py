@@ -160,7 +160,88 @@ def _has_display() -> bool:
     return sys.platform != "linux" or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
-class MapTidalEnv(gymnasium.Env):
+class Restorable:
+    """What makes an environment's episode savable (``get_state`` / ``set_state``) and the environment
+    picklable and deep-copyable: a copy is built anew from the constructor's arguments and given the
+    state. The environment has ``sim`` (a :class:`Simulation`), ``episode`` (an :class:`EpisodeState`)
+    and ``np_random``; it names the rest of its episode's bookkeeping in ``_STATE_ATTRIBUTES`` and
+    copies anything else in ``_task_state``."""
+
+    def __new__(cls, *args, **kwargs):
+        # the constructor's arguments, kept so that a pickled or deep-copied environment is built anew
+        # and then given the state (__getstate__)
+        env = super().__new__(cls)
+        env._init_args = (args, kwargs)
+        return env
+
+    STATE_VERSION = 1
+    # the episode's bookkeeping a state carries besides the simulation's (tasks add their own in
+    # _task_state); those a task does not have are skipped
+    _STATE_ATTRIBUTES = (
+        "_steps",
+        "_energy",
+        "_contact_s",
+        "target",
+        "target_yaw",
+        "_previous",
+        "mean_current",
+        "gust",
+    )
+
+    def get_state(self) -> dict:
+        """The whole state of the episode, copied: the simulation's (:meth:`Simulation.get_state`: the
+        physics, sensor noise, flight mode, autopilot and estimator), the task's (target, current, what
+        has been seen, the step count) and the environment's random generator. :meth:`set_state` on
+        this environment or another made with the same arguments then replays the same actions to the
+        same observations and rewards, bit for bit."""
+        return {
+            "version": self.STATE_VERSION,
+            "task": type(self).__name__,
+            "sim": self.sim.get_state(),
+            "episode": copy.deepcopy(
+                {name: getattr(self, name) for name in self._STATE_ATTRIBUTES if hasattr(self, name)}
+            ),
+            "task_state": self._task_state(),
+            "ended": self.episode.ended,
+            "np_random": copy.deepcopy(self.np_random.bit_generator.state),
+        }
+
+    def set_state(self, state: dict) -> None:
+        """Restore a :meth:`get_state`; one from another version or task raises ValueError first."""
+        if not isinstance(state, dict) or state.get("version") != self.STATE_VERSION:
+            got = state.get("version") if isinstance(state, dict) else type(state).__name__
+            raise ValueError(f"an environment state of version {self.STATE_VERSION} is needed, got {got!r}")
+        if state.get("task") != type(self).__name__:
+            raise ValueError(
+                f"the state is of {state.get('task')!r}, this environment is {type(self).__name__}"
+            )
+        self.sim.set_state(state["sim"])
+        for name, value in copy.deepcopy(state["episode"]).items():
+            setattr(self, name, value)
+        self._set_task_state(state["task_state"])
+        self.episode.ended = state["ended"]
+        self.np_random.bit_generator.state = copy.deepcopy(state["np_random"])
+
+    def _task_state(self) -> dict:
+        """The task's own state beyond ``_STATE_ATTRIBUTES``, copied."""
+        return {}
+
+    def _set_task_state(self, state: dict) -> None:
+        """Restore :meth:`_task_state`."""
+
+    def __getstate__(self) -> dict:
+        started = self.episode.ended != "never started"
+        return {"init": self._init_args, "state": self.get_state() if started else None}
+
+    def __setstate__(self, saved: dict) -> None:
+        args, kwargs = saved["init"]
+        self.__init__(*args, **kwargs)
+        self._init_args = (args, kwargs)
+        if saved["state"] is not None:
+            self.set_state(saved["state"])
+
+
+class MapTidalEnv(Restorable, gymnasium.Env):
     """Base class: one robot, estimated state, Box(-1, 1) actions, Dict or flat observations.
 
     ``render_mode="human"`` is offered only where a display exists (Gymnasium's checker builds the
@@ -170,13 +251,6 @@ class MapTidalEnv(gymnasium.Env):
         "render_modes": ["rgb_array", *(["human"] if _has_display() else [])],
         "render_fps": 10,
     }
-
-    def __new__(cls, *args, **kwargs):
-        # the constructor's arguments, kept so that a pickled or deep-copied environment is built anew
-        # and then given the state (__getstate__)
-        env = super().__new__(cls)
-        env._init_args = (args, kwargs)
-        return env
 
     def __init__(
         self,
@@ -296,73 +370,6 @@ class MapTidalEnv(gymnasium.Env):
                 raise ValueError(f"reset option 'current' is three finite numbers (m/s), got {got!r}")
             chosen["current"] = check_current(options["current"], "reset option 'current'")
         return chosen
-
-    # ----- state ------------------------------------------------------------------------------------
-    STATE_VERSION = 1
-    # the episode's bookkeeping a state carries besides the simulation's (tasks add their own in
-    # _task_state); those a task does not have are skipped
-    _STATE_ATTRIBUTES = (
-        "_steps",
-        "_energy",
-        "_contact_s",
-        "target",
-        "target_yaw",
-        "_previous",
-        "mean_current",
-        "gust",
-    )
-
-    def get_state(self) -> dict:
-        """The whole state of the episode, copied: the simulation's (:meth:`Simulation.get_state`: the
-        physics, sensor noise, flight mode, autopilot and estimator), the task's (target, current, what
-        has been seen, the step count) and the environment's random generator. :meth:`set_state` on
-        this environment or another made with the same arguments then replays the same actions to the
-        same observations and rewards, bit for bit."""
-        return {
-            "version": self.STATE_VERSION,
-            "task": type(self).__name__,
-            "sim": self.sim.get_state(),
-            "episode": copy.deepcopy(
-                {name: getattr(self, name) for name in self._STATE_ATTRIBUTES if hasattr(self, name)}
-            ),
-            "task_state": self._task_state(),
-            "ended": self.episode.ended,
-            "np_random": copy.deepcopy(self.np_random.bit_generator.state),
-        }
-
-    def set_state(self, state: dict) -> None:
-        """Restore a :meth:`get_state`; one from another version or task raises ValueError first."""
-        if not isinstance(state, dict) or state.get("version") != self.STATE_VERSION:
-            got = state.get("version") if isinstance(state, dict) else type(state).__name__
-            raise ValueError(f"an environment state of version {self.STATE_VERSION} is needed, got {got!r}")
-        if state.get("task") != type(self).__name__:
-            raise ValueError(
-                f"the state is of {state.get('task')!r}, this environment is {type(self).__name__}"
-            )
-        self.sim.set_state(state["sim"])
-        for name, value in copy.deepcopy(state["episode"]).items():
-            setattr(self, name, value)
-        self._set_task_state(state["task_state"])
-        self.episode.ended = state["ended"]
-        self.np_random.bit_generator.state = copy.deepcopy(state["np_random"])
-
-    def _task_state(self) -> dict:
-        """The task's own state beyond ``_STATE_ATTRIBUTES``, copied."""
-        return {}
-
-    def _set_task_state(self, state: dict) -> None:
-        """Restore :meth:`_task_state`."""
-
-    def __getstate__(self) -> dict:
-        started = self.episode.ended != "never started"
-        return {"init": self._init_args, "state": self.get_state() if started else None}
-
-    def __setstate__(self, saved: dict) -> None:
-        args, kwargs = saved["init"]
-        self.__init__(*args, **kwargs)
-        self._init_args = (args, kwargs)
-        if saved["state"] is not None:
-            self.set_state(saved["state"])
 
     @property
     def _estimate(self):

@@ -14,7 +14,7 @@ from gymnasium import spaces
 from maptidal.baselines import voronoi_viewpoints
 from maptidal.controllers.pose import PoseController
 from maptidal.controllers.task import TaskExecutor, TaskParams
-from maptidal.envs.gym.core import CONTACT_COST_PER_S, SAFE_BOX, EnvOptions, EpisodeState
+from maptidal.envs.gym.core import CONTACT_COST_PER_S, SAFE_BOX, EnvOptions, EpisodeState, Restorable
 from maptidal.envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
 from maptidal.envs.scenario import Scenario, load_scenario, with_frame
 from maptidal.envs.views import third_person_frame
@@ -23,7 +23,7 @@ MAX_ROBOTS = 4
 MIN_SEPARATION_M = 0.9  # start poses at least this far apart (a Heavy is 0.58 m wide)
 
 
-class TeamInspectionEnv(gymnasium.Env):
+class TeamInspectionEnv(Restorable, gymnasium.Env):
     """N BlueROV2s (default 2) inspect the tank's evaluated walls together and share the reward.
 
     ## Action space
@@ -85,6 +85,9 @@ class TeamInspectionEnv(gymnasium.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012 (Gymnasium's convention)
+    # what a saved state carries besides the simulation's (Restorable): the step count, the tasks done,
+    # the episode's start, the go-to-pose controllers' integrators of the tasks mode
+    _STATE_ATTRIBUTES = ("_steps", "tasks_done", "_episode_start", "_controllers")
 
     def __init__(
         self,
@@ -280,6 +283,12 @@ class TeamInspectionEnv(gymnasium.Env):
     def seen(self) -> np.ndarray:
         """Which wall voxels any robot's camera has seen this episode."""
         return self.walls.seen
+
+    def _task_state(self) -> dict:
+        return {"seen": self.walls.seen.copy()}
+
+    def _set_task_state(self, state: dict) -> None:
+        self.walls.restore(state["seen"])
 
     def _look(self) -> int:
         camera = self.vehicle.sensors.camera_position
