@@ -275,8 +275,7 @@ class Simulation:
             raise ValueError(f"the state is of another world: {state.get('layout')!r}, this one is {here!r}")
         physics = np.asarray(state["physics"], float)
         mujoco.mj_setState(self.model, self.data, physics, mujoco.mjtState.mjSTATE_INTEGRATION)
-        mujoco.mj_forward(self.model, self.data)
-        mujoco.mj_setState(self.model, self.data, physics, mujoco.mjtState.mjSTATE_INTEGRATION)
+        mujoco.mj_forward(self.model, self.data)  # positions and sensors derived from the state
         for name, value in copy.deepcopy(state["python"]).items():
             setattr(self, name, value)
 

@@ -91,12 +91,10 @@ class EnvOptions:
             raise ValueError(f"flight_mode must be one of {FLIGHT_MODES}, got {self.flight_mode!r}")
         if self.action == "thrusters" and self.flight_mode is not None:
             raise ValueError('action="thrusters" drives the thrusters directly: it takes no flight_mode')
-        if isinstance(self.pilot_gain, bool) or not (
-            isinstance(self.pilot_gain, int | float) and 0.1 <= self.pilot_gain <= 1.0
-        ):
-            raise ValueError(
-                f"pilot_gain must be a number in [0.1, 1.0] (ArduSub's bounds), got {self.pilot_gain!r}"
-            )
+        try:
+            PilotGain(self.pilot_gain)
+        except ValueError as error:
+            raise ValueError(f"pilot_gain: {error}") from None
 
     def simulation(self, scenario: Scenario) -> Simulation:
         """The simulation these options fly: the pilot action through ``flight_mode`` (STABILIZE unless
@@ -175,18 +173,9 @@ class Restorable:
         return env
 
     STATE_VERSION = 1
-    # the episode's bookkeeping a state carries besides the simulation's (tasks add their own in
-    # _task_state); those a task does not have are skipped
-    _STATE_ATTRIBUTES = (
-        "_steps",
-        "_energy",
-        "_contact_s",
-        "target",
-        "target_yaw",
-        "_previous",
-        "mean_current",
-        "gust",
-    )
+    # the episode's bookkeeping a state carries besides the simulation's, copied as it is; those an
+    # environment does not have are skipped
+    _STATE_ATTRIBUTES: ClassVar[tuple[str, ...]] = ()
 
     def get_state(self) -> dict:
         """The whole state of the episode, copied: the simulation's (:meth:`Simulation.get_state`: the
@@ -246,6 +235,19 @@ class MapTidalEnv(Restorable, gymnasium.Env):
 
     ``render_mode="human"`` is offered only where a display exists (Gymnasium's checker builds the
     environment in every mode the metadata lists); asked for without one, the constructor says why."""
+
+    # a saved state's episode bookkeeping (Restorable): the step count, the last step's energy and
+    # contact, and the pose tasks' target and water (GoToPose's progress, StationKeeping's current)
+    _STATE_ATTRIBUTES: ClassVar[tuple[str, ...]] = (
+        "_steps",
+        "_energy",
+        "_contact_s",
+        "target",
+        "target_yaw",
+        "_previous",
+        "mean_current",
+        "gust",
+    )
 
     metadata: ClassVar[dict] = {
         "render_modes": ["rgb_array", *(["human"] if _has_display() else [])],

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import ClassVar
 
 import gymnasium
 import mujoco
@@ -87,7 +88,7 @@ class TeamInspectionEnv(Restorable, gymnasium.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012 (Gymnasium's convention)
     # what a saved state carries besides the simulation's (Restorable): the step count, the tasks done,
     # the episode's start, the go-to-pose controllers' integrators of the tasks mode
-    _STATE_ATTRIBUTES = ("_steps", "tasks_done", "_episode_start", "_controllers")
+    _STATE_ATTRIBUTES: ClassVar[tuple[str, ...]] = ("_steps", "tasks_done", "_episode_start", "_controllers")
 
     def __init__(
         self,

@@ -77,6 +77,15 @@ def positive_float(text: str) -> float:
     return value
 
 
+def pilot_gain(text: str) -> float:
+    """An argparse type: ArduSub's joystick gain JS_GAIN, within its bounds 0.1 to 1.0
+    (:class:`maptidal.controllers.convention.PilotGain`)."""
+    value = finite_float(text)
+    if not 0.1 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"a pilot gain is 0.1 to 1.0 (ArduSub's bounds), got {text}")
+    return value
+
+
 def positive_int(text: str) -> int:
     """An argparse type: a whole number >= 1."""
     try:

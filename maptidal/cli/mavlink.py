@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from maptidal.cli.common import RunError, finite_float, positive_float
+from maptidal.cli.common import RunError, finite_float, pilot_gain, positive_float
 
 MAX_WAYPOINTS = 1000
 CONTROL_PERIOD_S = 0.05  # 20 Hz, the bridge's streaming rate
@@ -22,14 +22,6 @@ MODES = ("depth-hold", "stabilize", "manual", "alt_hold", "poshold")
 # BlueROV2 specifications); --max-depth sets the water at hand (a 2 m tank: --max-depth 2)
 RATED_DEPTH_M = 100.0
 LINK_SCHEMES = ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin")
-
-
-def pilot_gain(text: str) -> float:
-    """An argparse type: a pilot gain within ArduSub's bounds, 0.1 to 1.0."""
-    value = finite_float(text)
-    if not 0.1 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"a pilot gain is 0.1 to 1.0 (ArduSub's bounds), got {text}")
-    return value
 
 
 def connection_string(text: str) -> str:

@@ -9,7 +9,15 @@ from pathlib import Path
 
 import numpy as np
 
-from maptidal.cli.common import RunError, add_output_folder, output_dir, positive_float, positive_int
+from maptidal.cli.common import (
+    RunError,
+    add_output_folder,
+    output_dir,
+    pilot_gain,
+    positive_float,
+    positive_int,
+)
+from maptidal.controllers.flight_modes import FLIGHT_MODES
 from maptidal.files import atomic_write_bytes
 from maptidal.progress import ProgressBar
 
@@ -62,13 +70,13 @@ def register(commands) -> None:
     )
     sim.add_argument(
         "--mode",
-        choices=("manual", "stabilize", "alt_hold", "poshold"),
+        choices=FLIGHT_MODES,
         default="stabilize",
         help="the ArduSub flight mode the command is flown in (default %(default)s; poshold needs a DVL)",
     )
     sim.add_argument(
         "--pilot-gain",
-        type=positive_float,
+        type=pilot_gain,
         default=1.0,
         metavar="G",
         help="ArduSub's joystick gain JS_GAIN, 0.1 to 1.0, on surge, sway, heave and yaw (default "
@@ -143,7 +151,7 @@ def run_sim(args: argparse.Namespace) -> int:
     if args.duration > MAX_DURATION_S:
         raise ValueError(f"--duration must be at most {MAX_DURATION_S:g} s, got {args.duration:g}")
     period = scenario.substeps * scenario.timestep_s
-    gain = ModeParams(pilot_gain=PilotGain(args.pilot_gain))  # ArduSub's bounds, or a ValueError
+    gain = ModeParams(pilot_gain=PilotGain(args.pilot_gain))
     sim = Simulation(scenario, water_backend=args.water_backend, flight_mode=args.mode, mode_params=gain)
     sim.reset(seed=args.seed)
     if args.render_dir:

@@ -544,7 +544,8 @@ class Mission:
     def _keep_clear(self, robot: _Robot, reference: PoseReference, now: float) -> PoseReference:
         """The reference held where the robot's straight way to it would enter the ``clearance_m``
         ball about a teammate it gives way to (MissionParams), on its own side; a robot inside such a
-        ball that is not leaving it backs straight out (:func:`maptidal.mission.clearance.waiting_point`).
+        ball that is not leaving it backs out horizontally, at its own depth
+        (:func:`maptidal.mission.clearance.waiting_point`).
         It waits there until the teammate's next message says it has gone.
 
         Whom it gives way to: every teammate heard from lately, but one of a higher index only while that
