@@ -100,15 +100,17 @@ SNAPSHOT_MAX_GEOM = 10000
 
 @dataclass(frozen=True)
 class StereoSnapshot:
-    """A robot's stereo pair as it is at one moment, to draw later (:meth:`Simulation.stereo_snapshot`):
-    each camera's scene, and each frame's noise seed (None without the water model)."""
+    """A robot's stereo pair, or one of its cameras, as it is at one moment, to draw later
+    (:meth:`Simulation.stereo_snapshot`): each camera's scene, and each frame's noise seed (None without
+    the water model), in the order of ``sides``."""
 
     robot: str
-    scenes: tuple[mujoco.MjvScene, mujoco.MjvScene]
-    seeds: tuple[int | None, int | None]
+    scenes: tuple[mujoco.MjvScene, ...]
+    seeds: tuple[int | None, ...]
     water: bool
     on_gl: bool
     depth: bool
+    sides: tuple[str, ...] = ("left", "right")
 
 
 class Simulation:
@@ -543,19 +545,29 @@ class Simulation:
         """
         return self.render_snapshot(self.stereo_snapshot(robot, depth=depth, water=water))
 
-    def stereo_snapshot(self, robot: str, depth: bool = False, water: bool = True) -> StereoSnapshot:
-        """What :meth:`render_stereo` would render now, taken now and drawn later by
-        :meth:`render_snapshot`: each camera's scene and its frame's noise seed (drawn from the
-        simulation's generator in the order render_stereo draws them). Drawing it on another thread,
-        while the physics steps on, gives the images of this moment, and the generator's stream is the
-        same as rendering at once."""
+    def render_left(self, robot: str, depth: bool = False, water: bool = True):
+        """The robot's left camera image alone, uint8 RGB ``(H, W, 3)``, drawn without the right camera:
+        half the drawing of :meth:`render_stereo`. With ``depth=True`` returns ``(left, left_depth)``."""
+        drawn = self.render_snapshot(self.stereo_snapshot(robot, depth=depth, water=water, sides=("left",)))
+        return drawn if depth else drawn[0]
+
+    def stereo_snapshot(
+        self, robot: str, depth: bool = False, water: bool = True, sides: tuple[str, ...] = ("left", "right")
+    ) -> StereoSnapshot:
+        """What :meth:`render_stereo` (or, with ``sides=("left",)``, :meth:`render_left`) would render
+        now, taken now and drawn later by :meth:`render_snapshot`: each camera's scene and its frame's
+        noise seed (drawn from the simulation's generator in the order rendering at once draws them).
+        Drawing it on another thread, while the physics steps on, gives the images of this moment, and
+        the generator's stream is the same as rendering at once."""
         spec = self._specs[self._check(robot)]
         if "stereo" not in spec.sensors:
             raise ValueError(f"{robot} has no stereo camera in this scenario")
+        if not sides or any(side not in ("left", "right") for side in sides):
+            raise ValueError(f"sides must be a sequence of 'left' and 'right', got {sides!r}")
         water = water and self.water.params.enabled
         on_gl = water and self.water_backend == "gl"
         scenes, seeds = [], []
-        for side in ("left", "right"):
+        for side in sides:
             try:
                 scene = self._free_scenes.get_nowait()
             except queue.Empty:
@@ -572,7 +584,7 @@ class Simulation:
                 seeds.append(int(self.rng.integers(1 << 63)))  # the frame's own noise generator
             else:
                 seeds.append(None)
-        return StereoSnapshot(robot, (scenes[0], scenes[1]), (seeds[0], seeds[1]), water, on_gl, depth)
+        return StereoSnapshot(robot, tuple(scenes), tuple(seeds), water, on_gl, depth, tuple(sides))
 
     def render_snapshot(self, snapshot: StereoSnapshot):
         """Draw a :meth:`stereo_snapshot`: the images :meth:`render_stereo` returns. Call it on the thread

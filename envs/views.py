@@ -51,7 +51,7 @@ def third_person_frame(
     for robot in robots:
         left = insets.get(robot) if insets is not None else None
         if left is None:
-            left, _ = sim.render_stereo(robot)
+            left = sim.render_left(robot)
         frame[4 : 4 + size[1], right - size[0] : right] = cv2.resize(left, size, interpolation=cv2.INTER_AREA)
         if labels:  # the robot's name in the inset's corner, for a view with several robots
             corner = (right - size[0] + 3, 4 + size[1] - 4)

@@ -33,7 +33,8 @@ def make_env(seed: int):
     from stable_baselines3.common.monitor import Monitor
 
     def build():
-        env = Monitor(gymnasium.make(ENV_ID, flat_obs=True, episode_s=12.0), info_keywords=("is_success",))
+        made = gymnasium.make(ENV_ID, flat_obs=True, max_episode_steps=120)  # 12 s episodes
+        env = Monitor(made, info_keywords=("is_success",))
         env.reset(seed=seed)
         return env
 
@@ -42,7 +43,7 @@ def make_env(seed: int):
 
 def evaluate(model, episodes: int, seed: int) -> float:
     """Share of new episodes in which the deterministic policy reaches the pose (within tolerance)."""
-    env = gymnasium.make(ENV_ID, flat_obs=True, episode_s=12.0)
+    env = gymnasium.make(ENV_ID, flat_obs=True, max_episode_steps=120)
     reached = 0
     for k in range(episodes):
         observation, _ = env.reset(seed=seed + k)

@@ -300,7 +300,7 @@ def _episode(env, theta, seed) -> tuple[float, bool]:
 def test_a_linear_policy_trained_by_the_cross_entropy_method_reaches_the_target():
     """The reward and the observations carry the signal: from zero gains, six CEM generations of 16
     (one common episode each) find a policy that reaches the pose in most new episodes."""
-    env = gymnasium.make("MapTidal/GoToPose-v1", episode_s=8.0)
+    env = gymnasium.make("MapTidal/GoToPose-v1", max_episode_steps=80)
     rng = np.random.default_rng(0)
     mean, std = np.zeros(8), np.ones(8)
     try:

@@ -25,6 +25,15 @@ ENVIRONMENTS = {
     "MapTidal/TankInspection-v1": "maptidal.envs.gym.tank_inspection:TankInspectionEnv",
     "MapTidal/TeamInspection-v1": "maptidal.envs.gym.team_inspection:TeamInspectionEnv",
 }
+# each registration's max_episode_steps: its class's default episode_s over the default control period of
+# 0.1 s (GoToPose and StationKeeping 20 s, the inspection tasks 60 s). gymnasium.make ends episodes there
+# (TimeLimit) unless given max_episode_steps (maptidal.envs.gym.core.EpisodeLength)
+MAX_EPISODE_STEPS = {
+    "MapTidal/GoToPose-v1": 200,
+    "MapTidal/StationKeeping-v1": 200,
+    "MapTidal/TankInspection-v1": 600,
+    "MapTidal/TeamInspection-v1": 600,
+}
 
 
 def register_environments() -> None:
@@ -33,4 +42,9 @@ def register_environments() -> None:
 
     for env_id, entry_point in ENVIRONMENTS.items():
         if env_id not in gymnasium.registry:
-            gymnasium.register(id=env_id, entry_point=entry_point, disable_env_checker=False)
+            gymnasium.register(
+                id=env_id,
+                entry_point=entry_point,
+                max_episode_steps=MAX_EPISODE_STEPS[env_id],
+                disable_env_checker=False,
+            )

@@ -20,6 +20,7 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
+from maptidal.camera import StereoCameraParams
 from maptidal.controllers.convention import PilotGain
 from maptidal.controllers.estimation import rotation_from_rpy, wrap_angle
 from maptidal.controllers.flight_modes import FLIGHT_MODES, ModeParams
@@ -98,10 +99,21 @@ class EnvOptions:
 
     def simulation(self, scenario: Scenario) -> Simulation:
         """The simulation these options fly: the pilot action through ``flight_mode`` (STABILIZE unless
-        given) at ``pilot_gain``, or the thrusters directly (MANUAL)."""
+        given) at ``pilot_gain``, or the thrusters directly (MANUAL). With image observations its cameras
+        draw at ``image_size`` itself (:meth:`camera`), not at the OAK-D's 640 x 400 and then shrunk."""
         mode = (self.flight_mode or "stabilize") if self.action == "pilot" else "manual"
         modes = ModeParams(pilot_gain=PilotGain(float(self.pilot_gain)))
-        return Simulation(scenario, flight_mode=mode, mode_params=modes)
+        return Simulation(scenario, camera=self.camera(), flight_mode=mode, mode_params=modes)
+
+    def camera(self) -> StereoCameraParams | None:
+        """The stereo pair the observation's images come from: the OAK-D binned to ``image_size``, so
+        its field of view is the sensor's (78.5 x 54.1 deg) at every size, and a size of another aspect
+        than the sensor's 1.6 has non-square pixels, as a resized 640 x 400 image had. None (the
+        OAK-D's 640 x 400 mode) without image observations."""
+        if self.obs_images is None:
+            return None
+        height, width = (int(v) for v in self.image_size)
+        return StereoCameraParams(width=width, height=height)
 
     @classmethod
     def checked(cls, options: dict, also: tuple[str, ...] = ()) -> EnvOptions:
@@ -220,17 +232,60 @@ class Restorable:
 
     def __getstate__(self) -> dict:
         started = self.episode.ended != "never started"
-        return {"init": self._init_args, "state": self.get_state() if started else None}
+        made = getattr(self, "spec", None)  # what gymnasium.make gave it (EpisodeLength)
+        return {"init": self._init_args, "state": self.get_state() if started else None, "spec": made}
 
     def __setstate__(self, saved: dict) -> None:
         args, kwargs = saved["init"]
         self.__init__(*args, **kwargs)
         self._init_args = (args, kwargs)
+        if saved.get("spec") is not None:
+            self.spec = saved["spec"]
         if saved["state"] is not None:
             self.set_state(saved["state"])
 
 
-class MapTidalEnv(Restorable, gymnasium.Env):
+class EpisodeLength:
+    """Who ends an episode on time. Constructed directly, the environment does, after ``episode_s``
+    (its ``max_steps`` control periods). Made by ``gymnasium.make``, Gymnasium's TimeLimit does, after
+    ``max_episode_steps`` steps, as in Gymnasium's own MuJoCo environments: the registration sets it to
+    the task's default length (``maptidal.envs.gym.MAX_EPISODE_STEPS``), ``make(..., max_episode_steps=N)``
+    changes it, and ``-1`` removes it. So the spec, ``TimeAwareObservation`` and the episodes agree.
+
+    ``episode_s`` through ``make`` is refused with a ValueError naming ``max_episode_steps``: the
+    registered TimeLimit is added after the environment is built, so the two could disagree. An
+    environment whose steps last no fixed time (the team's tasks mode, a step a whole task) says so in
+    ``_steps_are_periods``; its episodes end after ``episode_s`` of simulated time however made."""
+
+    _own_time_limit = True
+    _made_spec = None
+    _steps_are_periods = True
+
+    @property
+    def spec(self):
+        """The ``EnvSpec`` ``gymnasium.make`` gave this environment (None when constructed directly)."""
+        return self._made_spec
+
+    @spec.setter
+    def spec(self, spec) -> None:
+        if spec is not None and self._steps_are_periods and "episode_s" in (spec.kwargs or {}):
+            registered = gymnasium.registry.get(spec.id)
+            steps = registered.max_episode_steps if registered is not None else None
+            raise ValueError(
+                f"through gymnasium.make an episode's length is max_episode_steps (Gymnasium's TimeLimit; "
+                f"{spec.id} registers {steps} steps of control_period_s), not episode_s: pass "
+                f"max_episode_steps=round(episode_s / control_period_s) instead, or construct the class "
+                f"with episode_s"
+            )
+        self._own_time_limit = spec is None
+        self._made_spec = spec
+
+    def _out_of_steps(self, steps: int) -> bool:
+        """Whether ``steps`` control periods end the episode on time (never when TimeLimit does it)."""
+        return self._own_time_limit and steps >= self.max_steps
+
+
+class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
     """Base class: one robot, estimated state, Box(-1, 1) actions, Dict or flat observations.
 
     ``render_mode="human"`` is offered only where a display exists (Gymnasium's checker builds the
@@ -388,7 +443,7 @@ class MapTidalEnv(Restorable, gymnasium.Env):
         self._act(action)
         truth = self.sim.ground_truth(self.robot)
         reward, terminated, info = self._reward(truth)
-        truncated = not terminated and self._steps >= self.max_steps
+        truncated = not terminated and self._out_of_steps(self._steps)
         return self.episode.record(
             (self._observation(), float(reward), bool(terminated), bool(truncated), info)
         )
@@ -453,14 +508,10 @@ class MapTidalEnv(Restorable, gymnasium.Env):
         return observation
 
     def _images(self) -> dict[str, np.ndarray]:
-        import cv2
-
-        height, width = (int(v) for v in self.options.image_size)
-        left, right = self.sim.render_stereo(self.robot)
-        small = [cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA) for image in (left, right)]
+        # the cameras draw at image_size (EnvOptions.camera); "left" draws the left camera alone
         if self.options.obs_images == "left":
-            return {"left": small[0]}
-        return {"stereo": np.stack(small)}
+            return {"left": self.sim.render_left(self.robot)}
+        return {"stereo": np.stack(self.sim.render_stereo(self.robot))}
 
     # ----- helpers for tasks ----------------------------------------------------------------
     def _sample_pose(self) -> tuple[np.ndarray, float]:

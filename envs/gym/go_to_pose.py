@@ -73,8 +73,11 @@ class GoToPoseEnv(PoseTargetEnv):
     ## Episode end
 
     Never terminated: a collision costs per second in contact, and the robot may surface, as a real one
-    would (in v0 both ended the episode, which gave policies a way out). Truncated: after ``episode_s``
-    (default 20 s). ``info["is_success"]`` is true while within tolerance.
+    would (in v0 both ended the episode, which gave policies a way out). Truncated: made by
+    ``gymnasium.make``, after ``max_episode_steps`` steps (TimeLimit; registered 200, 20 s at the default
+    0.1 s period; ``make(..., max_episode_steps=N)`` changes it); constructed directly, after
+    ``episode_s`` (default 20 s). ``episode_s`` is not taken through ``make``
+    (``maptidal.envs.gym.core.EpisodeLength``). ``info["is_success"]`` is true while within tolerance.
 
     ## Arguments
 

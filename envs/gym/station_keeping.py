@@ -48,7 +48,9 @@ class StationKeepingEnv(PoseTargetEnv):
     ## Episode end
 
     Never terminated: a collision costs per second in contact and the robot may surface, as a real one
-    would. Truncated: after ``episode_s`` (default 20 s). ``info["is_success"]``: within tolerance.
+    would. Truncated as in ``MapTidal/GoToPose-v1``: after 200 steps made by ``gymnasium.make``
+    (``max_episode_steps``), after ``episode_s`` (default 20 s) constructed directly.
+    ``info["is_success"]``: within tolerance.
 
     ## Arguments
 

@@ -106,7 +106,9 @@ class TankInspectionEnv(MapTidalEnv):
 
     Never terminated: a collision costs per second in contact and the robot may surface (in v0 both
     ended the episode, and a policy ramming the nearest wall saw more before the end than one doing
-    nothing, which floated up and ended too). Truncated: after ``episode_s`` (default 60 s).
+    nothing, which floated up and ended too). Truncated as in ``MapTidal/GoToPose-v1``: after 600 steps
+    made by ``gymnasium.make`` (``max_episode_steps``), after ``episode_s`` (default 60 s) constructed
+    directly.
     ``info["coverage"]`` is the share seen.
 
     ## Arguments

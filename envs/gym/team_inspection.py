@@ -15,7 +15,14 @@ from gymnasium import spaces
 from maptidal.baselines import voronoi_viewpoints
 from maptidal.controllers.pose import PoseController
 from maptidal.controllers.task import TaskExecutor, TaskParams
-from maptidal.envs.gym.core import CONTACT_COST_PER_S, SAFE_BOX, EnvOptions, EpisodeState, Restorable
+from maptidal.envs.gym.core import (
+    CONTACT_COST_PER_S,
+    SAFE_BOX,
+    EnvOptions,
+    EpisodeLength,
+    EpisodeState,
+    Restorable,
+)
 from maptidal.envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
 from maptidal.envs.scenario import Scenario, load_scenario, with_frame
 from maptidal.envs.views import third_person_frame
@@ -24,7 +31,7 @@ MAX_ROBOTS = 4
 MIN_SEPARATION_M = 0.9  # start poses at least this far apart (a Heavy is 0.58 m wide)
 
 
-class TeamInspectionEnv(Restorable, gymnasium.Env):
+class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
     """N BlueROV2s (default 2) inspect the tank's evaluated walls together and share the reward.
 
     ## Action space
@@ -68,7 +75,10 @@ class TeamInspectionEnv(Restorable, gymnasium.Env):
 
     Terminated: with ``action="tasks"``, when every task is done. Collisions and surfacing end nothing
     (in v0 they did, and ramming a wall saw more before the end than doing nothing, which floated up
-    and ended too). Truncated: after ``episode_s`` (60 s).
+    and ended too). Truncated: after ``episode_s`` (60 s) when constructed directly; made by
+    ``gymnasium.make``, after ``max_episode_steps`` steps (TimeLimit; registered 600, 60 s), except with
+    ``action="tasks"``, whose steps last a task each: there the episode ends after ``episode_s`` of
+    simulated time, however made (``maptidal.envs.gym.core.EpisodeLength``).
 
     ## Rendering
 
@@ -104,6 +114,7 @@ class TeamInspectionEnv(Restorable, gymnasium.Env):
         self.render_mode = render_mode
         self._renderer = None
         self.tasks_mode = options.get("action") == "tasks"
+        self._steps_are_periods = not self.tasks_mode  # a task step lasts as long as its task (EpisodeLength)
         if self.tasks_mode:
             options = {**options, "action": "pilot"}
         if not (math.isfinite(task_timeout_s) and task_timeout_s > 0):
@@ -225,7 +236,7 @@ class TeamInspectionEnv(Restorable, gymnasium.Env):
         contact_s = touching * self.scenario.control_period_s
         reward = REWARD_PER_VOXEL * new - 0.05 * energy / (self.substeps * len(self.agents))
         reward -= CONTACT_COST_PER_S * contact_s
-        truncated = self._steps >= self.max_steps
+        truncated = self._out_of_steps(self._steps)
         info = {"new_voxels": new, "coverage": float(self.seen.mean()), "contact_s": contact_s}
         return self._observation(), float(reward), False, bool(truncated), info
 
