@@ -26,6 +26,13 @@ so the latest command is re-sent every ``command_period_s`` (default 0.05 s, 20 
 - Ctrl-C (KeyboardInterrupt) and SIGTERM (:func:`install_signal_handlers`) leave the ``with`` block
   the same way.
 
+**Pilot gain.** ArduSub scales MANUAL_CONTROL's surge, sway, heave and yaw by its joystick gain
+(``transform_manual_control_to_rc_override``), which it takes from JS_GAIN_DEFAULT (bounded by
+JS_GAIN_MIN and JS_GAIN_MAX) at boot and changes only on joystick buttons; heave also by JS_THR_GAIN.
+:meth:`MavlinkBridge.check_pilot_gain` reads those parameters and refuses a vehicle whose gain is not
+what the controller or policy was made for, or writes them (which takes effect at the vehicle's next
+boot). The bridge never presses a button, so the gain it checked is the gain it flies.
+
 **Signing.** MAVLink 2 signing with a 32-byte key (:func:`load_signing_key`: from a file or the
 environment variable ``MAPTIDAL_MAVLINK_KEY``, never from a command line). With a key, unsigned or
 wrongly signed packets from the vehicle are dropped and counted.
@@ -45,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .convention import pilot_command
+from .convention import PilotGain, boot_gain, pilot_command
 from .estimation import StateEstimate, rotation_from_rpy
 from .mavlink_wire import (
     ARDUSUB_MODES,
@@ -68,6 +75,10 @@ MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
 MAV_MODE_FLAG_SAFETY_ARMED = 128
 MAV_TYPE_GCS = 6
 MAV_RESULT_ACCEPTED = 0
+MAV_PARAM_TYPE_REAL32 = 9
+# ArduSub's joystick-gain parameters (PilotGain), in the order boot_gain takes the first four
+GAIN_PARAMETERS = ("JS_GAIN_DEFAULT", "JS_GAIN_MIN", "JS_GAIN_MAX", "JS_GAIN_STEPS", "JS_THR_GAIN")
+GAIN_TOLERANCE = 0.005  # ArduSub stores the gains as floats; a GCS may round them to 2 decimals
 WATER_DENSITY_KG_M3 = 997.0  # fresh water at 25 C; ArduSub's default specific gravity is 1.0
 STANDARD_PRESSURE_HPA = 1013.25
 GRAVITY = 9.80665
@@ -215,6 +226,7 @@ class MavlinkBridge:
         self._send_lock = threading.RLock()
         self._stop = threading.Event()
         self._acks: dict[int, int] = {}
+        self._param_values: dict[str, float] = {}  # PARAM_VALUE answers, by name
         self._threads: list[threading.Thread] = []
         self._connection = None
         self.sent_commands = 0
@@ -352,6 +364,81 @@ class MavlinkBridge:
                 0, *self._target(), 1, mask, north_m, east_m, down_m, 0, 0, 0, 0, 0, 0, yaw_rad, 0
             )
 
+    def read_param(self, name: str, timeout_s: float | None = None) -> float:
+        """The vehicle's parameter ``name`` (PARAM_REQUEST_READ, answered by PARAM_VALUE), asked again
+        every half second until ``timeout_s`` (default ``ack_timeout_s``); BridgeError if none comes."""
+        return self._param_exchange(name, None, timeout_s)
+
+    def set_param(self, name: str, value: float, timeout_s: float | None = None) -> float:
+        """Set the vehicle's parameter ``name`` (PARAM_SET); returns the value its PARAM_VALUE echoes,
+        or raises BridgeError when none comes or the echo differs."""
+        echoed = self._param_exchange(name, float(value), timeout_s)
+        if not math.isclose(echoed, float(value), rel_tol=1e-6, abs_tol=1e-6):
+            raise BridgeError(f"the vehicle kept {name} = {echoed:g}, not the {float(value):g} sent")
+        return echoed
+
+    def _param_exchange(self, name: str, value: float | None, timeout_s: float | None) -> float:
+        if self._connection is None:
+            raise BridgeError("the bridge is not connected")
+        wait_s = self.params.ack_timeout_s if timeout_s is None else timeout_s
+        deadline = time.monotonic() + wait_s
+        with self._lock:
+            self._param_values.pop(name, None)
+        next_ask = 0.0
+        while time.monotonic() < deadline:
+            if time.monotonic() >= next_ask:  # a lossy link may drop the request or the answer
+                with self._send_lock:
+                    if value is None:
+                        self._connection.mav.param_request_read_send(*self._target(), name.encode(), -1)
+                    else:
+                        self._connection.mav.param_set_send(
+                            *self._target(), name.encode(), value, MAV_PARAM_TYPE_REAL32
+                        )
+                next_ask = time.monotonic() + 0.5
+            with self._lock:
+                answer = self._param_values.get(name)
+            if answer is not None:
+                return answer
+            time.sleep(0.01)
+        raise BridgeError(f"no answer for the vehicle's parameter {name} within {wait_s:g} s")
+
+    def check_pilot_gain(self, expected: PilotGain, write: bool = False) -> float:
+        """Make sure the vehicle scales the pilot command as ``expected`` (the gain and JS_THR_GAIN the
+        controller or policy was made for; the simulator's default is 1, full authority): read
+        JS_GAIN_DEFAULT, JS_GAIN_MIN, JS_GAIN_MAX, JS_GAIN_STEPS and JS_THR_GAIN, work out the gain
+        ArduSub starts with (:func:`maptidal.controllers.convention.boot_gain`) and return it when it
+        matches. Otherwise raise BridgeError saying what to set; with ``write``, set the parameters
+        first (JS_GAIN_MIN and JS_GAIN_MAX widened to take the gain), and the error says to reboot the
+        vehicle, since ArduSub reads them only at boot."""
+        values = {name: self.read_param(name) for name in GAIN_PARAMETERS}
+        gain = boot_gain(*(values[name] for name in GAIN_PARAMETERS[:3]), int(values["JS_GAIN_STEPS"]))
+        throttle = values["JS_THR_GAIN"]
+        if (
+            abs(gain - expected.gain) <= GAIN_TOLERANCE
+            and abs(throttle - expected.throttle_gain) <= GAIN_TOLERANCE
+        ):
+            return gain
+        found = (
+            f"the vehicle scales the pilot command by a gain of {gain:.2f} (JS_GAIN_DEFAULT "
+            f"{values['JS_GAIN_DEFAULT']:g} within JS_GAIN_MIN {values['JS_GAIN_MIN']:g} and JS_GAIN_MAX "
+            f"{values['JS_GAIN_MAX']:g}) and heave further by JS_THR_GAIN {throttle:g}; the controller "
+            f"was made for {expected.gain:g} and {expected.throttle_gain:g}"
+        )
+        if not write:
+            raise BridgeError(
+                f"{found}. Set JS_GAIN_DEFAULT {expected.gain:g}, JS_GAIN_MAX at least that, JS_THR_GAIN "
+                f"{expected.throttle_gain:g} and reboot the vehicle (or let the bridge write them), or fly "
+                f"a controller made for a gain of {gain:.2f}"
+            )
+        self.set_param("JS_GAIN_MAX", max(values["JS_GAIN_MAX"], expected.gain))
+        self.set_param("JS_GAIN_MIN", min(values["JS_GAIN_MIN"], expected.gain))
+        self.set_param("JS_GAIN_DEFAULT", expected.gain)
+        self.set_param("JS_THR_GAIN", expected.throttle_gain)
+        raise BridgeError(
+            f"{found}. JS_GAIN_DEFAULT is now {expected.gain:g} and JS_THR_GAIN {expected.throttle_gain:g}; "
+            f"ArduSub takes them at boot: reboot the vehicle, then connect again"
+        )
+
     def wait_for(
         self, condition: Callable[[VehicleTelemetry], bool], timeout_s: float | None, what: str
     ) -> None:
@@ -432,6 +519,9 @@ class MavlinkBridge:
         elif kind == "COMMAND_ACK":
             with self._lock:
                 self._acks[message.command] = message.result
+        elif kind == "PARAM_VALUE":
+            with self._lock:
+                self._param_values[str(message.param_id)] = float(message.param_value)
         elif kind == "ATTITUDE":
             t.attitude_ned = np.array([message.roll, message.pitch, message.yaw])
             t.rates_frd = np.array([message.rollspeed, message.pitchspeed, message.yawspeed])

@@ -156,3 +156,27 @@ def t200_curve(voltage_v: float) -> ThrustCurve:
         return T200_CURVES[float(voltage_v)]
     except KeyError:
         raise ValueError(f"no T200 curve for {voltage_v} V; known: {sorted(T200_CURVES)} V") from None
+
+
+def t200_curve_between(voltage_v: float) -> ThrustCurve:
+    """The T200 curve at a supply voltage from 12 to 16 V: full thrust and deadband interpolated
+    linearly between the two published curves (:data:`T200_CURVES`), the shape kept. The interpolation
+    is our assumption: the workbook's 14 V sheet is not transcribed here. A BlueROV2's 4S lithium-ion
+    battery (14.8 V nominal) sags across this range as it drains."""
+    v = float(voltage_v)
+    if not (12.0 <= v <= 16.0):
+        raise ValueError(f"the T200 curve is known from 12 to 16 V, got {voltage_v!r} V")
+    t = (v - 12.0) / 4.0
+    low, high = T200_12V, T200_16V
+
+    def between(a: float, b: float) -> float:
+        return a + t * (b - a)
+
+    return ThrustCurve(
+        v,
+        between(low.max_forward_n, high.max_forward_n),
+        between(low.max_reverse_n, high.max_reverse_n),
+        between(low.deadband_us, high.deadband_us),
+        low.forward_shape,
+        low.reverse_shape,
+    )

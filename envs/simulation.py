@@ -58,8 +58,9 @@ from maptidal.envs.rendering import (
     update_camera_scene,
 )
 from maptidal.envs.scenario import Scenario, check_current, load_scenario
-from maptidal.envs.sensors import RobotSensors
-from maptidal.envs.water import WaterModel, depth_to_range, worker_thread
+from maptidal.envs.sensors import RobotSensors, SensorNoise
+from maptidal.envs.vehicle import VehicleParams
+from maptidal.envs.water import WaterModel, WaterParams, depth_to_range, worker_thread
 from maptidal.envs.world import DEPTH_SENSOR_POSITION, RobotPlacement, camera_offsets, compose
 
 WATER_BACKENDS = ("auto", "gl", "cpu", "prefer-gl")
@@ -176,6 +177,12 @@ class Simulation:
             )
             self._mixers[robot.name] = MixerParams(frame=robot.vehicle.ardusub_frame)
             self._vehicle_models[robot.name] = robot.vehicle.controller_model()
+        # the vehicles the physics flies (set_plant): the scenario's, unless randomised; the robots'
+        # controllers, estimators and autopilots keep the scenario's, what a robot believes of itself
+        self._plants: dict[str, VehicleParams] = {r.name: r.vehicle for r in self.scenario.robots}
+        self._thruster_gains: dict[str, np.ndarray] = {
+            r.name: np.ones(r.vehicle.n_thrusters) for r in self.scenario.robots
+        }
         check_water_backend(water_backend)
         self.water = WaterModel(self.scenario.water)
         self._requested_water_backend = water_backend
@@ -225,7 +232,7 @@ class Simulation:
         hydrodynamics.pack_userdata(
             self.data.userdata,
             [self._slots[name] for name in self.robots],
-            [self._specs[name].vehicle for name in self.robots],
+            [self._plants[name] for name in self.robots],
             np.asarray(self.scenario.current),
             water_surface_z=self.scenario.tank.height,
         )
@@ -247,6 +254,9 @@ class Simulation:
         "_readings",
         "_thruster_outputs",
         "_tracked",
+        "_plants",
+        "_thruster_gains",
+        "water",
     )
     STATE_VERSION = 1
 
@@ -280,6 +290,8 @@ class Simulation:
         mujoco.mj_forward(self.model, self.data)  # positions and sensors derived from the state
         for name, value in copy.deepcopy(state["python"]).items():
             setattr(self, name, value)
+        for robot in self.robots:  # the plants' numbers that live in the model, not in its state
+            self._apply_plant_to_model(robot)
 
     def _state_layout(self) -> tuple:
         """What a state must match to be put back here: the robots and the model's sizes."""
@@ -314,6 +326,75 @@ class Simulation:
         self.data.ctrl[self._ctrl_adr[robot] : self._ctrl_adr[robot] + n] = 0.0
         mujoco.mj_forward(self.model, self.data)
         self.set_flight_mode(robot, self._flight_modes[robot])
+
+    def set_plant(self, robot: str, vehicle: VehicleParams, thruster_gains=None) -> None:
+        """Fly ``robot``'s physics as ``vehicle`` from now on (its mass and inertia, buoyancy and centre
+        of buoyancy, added mass, damping, thrust curve and lag), each thruster's thrust times
+        ``thruster_gains`` (default 1; above 1 a thruster can push harder than the curve's maximum).
+        Its controllers, estimator and autopilot keep the scenario's vehicle: what a robot believes of
+        itself, so a plant that differs is the gap between a model and a real vehicle (domain
+        randomisation, :mod:`maptidal.envs.randomization`). :meth:`reset` keeps the plant; the
+        scenario's vehicle puts it back. Set it between :meth:`reset` and the first step: it rewrites
+        every robot's hydrodynamics parameters, the water current included."""
+        believed = self._specs[self._check(robot)].vehicle
+        if vehicle.n_thrusters != believed.n_thrusters or vehicle.ardusub_frame != believed.ardusub_frame:
+            raise ValueError(
+                f"{robot}: a plant must have the robot's frame ({believed.ardusub_frame}, "
+                f"{believed.n_thrusters} thrusters), got {vehicle.ardusub_frame} with {vehicle.n_thrusters}"
+            )
+        gains = np.ones(vehicle.n_thrusters) if thruster_gains is None else np.asarray(thruster_gains, float)
+        if gains.shape != (vehicle.n_thrusters,) or not (np.all(np.isfinite(gains)) and np.all(gains > 0)):
+            raise ValueError(
+                f"{robot}: thruster_gains must be {vehicle.n_thrusters} positive finite numbers, "
+                f"got {np.asarray(thruster_gains).tolist()}"
+            )
+        self._plants[robot] = vehicle
+        self._thruster_gains[robot] = gains.copy()
+        self._apply_plant_to_model(robot)
+        block = self.data.userdata
+        current = block[hydrodynamics.HEADER + hydrodynamics.SLOT_CURRENT :][:3].copy()
+        enabled = bool(block[2])
+        hydrodynamics.pack_userdata(
+            block,
+            [self._slots[name] for name in self.robots],
+            [self._plants[name] for name in self.robots],
+            current,
+            enabled=enabled,
+            water_surface_z=self.scenario.tank.height,
+        )
+
+    def plant(self, robot: str) -> VehicleParams:
+        """The vehicle ``robot``'s physics flies (:meth:`set_plant`; the scenario's by default)."""
+        return self._plants[self._check(robot)]
+
+    def _apply_plant_to_model(self, robot: str) -> None:
+        """Write the plant's numbers that MuJoCo's model holds: the body's mass and inertia, the
+        thrusters' lag and their control range (a gain above 1 needs room above full command)."""
+        vehicle, gains = self._plants[robot], self._thruster_gains[robot]
+        body = self._slots[robot].body_id
+        self.model.body_mass[body] = vehicle.mass
+        self.model.body_inertia[body] = vehicle.inertia
+        first = self._ctrl_adr[robot]
+        actuators = slice(first, first + vehicle.n_thrusters)
+        self.model.actuator_dynprm[actuators, 0] = vehicle.thruster.time_constant_s
+        self.model.actuator_ctrlrange[actuators, 0] = -gains
+        self.model.actuator_ctrlrange[actuators, 1] = gains
+        # the constants MuJoCo derives from masses when it compiles (body_subtreemass and the like):
+        # without this its mass matrix kept the compiled mass while gravity took the new one. It works
+        # in an MjData of its own, which it moves to qpos0: never the simulation's
+        mujoco.mj_setConst(self.model, mujoco.MjData(self.model))
+
+    def set_sensor_noise(self, robot: str, noise: SensorNoise) -> None:
+        """``robot``'s sensor noise levels from now on (:meth:`reset` keeps them)."""
+        self._sensors[self._check(robot)].noise = noise
+
+    def sensor_noise(self, robot: str) -> SensorNoise:
+        """``robot``'s sensor noise levels."""
+        return self._sensors[self._check(robot)].noise
+
+    def set_water(self, params: WaterParams) -> None:
+        """The water the cameras look through from now on (turbidity, noise, vignetting)."""
+        self.water = WaterModel(params)
 
     def set_current(self, current_world) -> None:
         """Change the water current (m/s, world frame) from now on; :meth:`reset` restores the
@@ -424,8 +505,8 @@ class Simulation:
         # thrust the commands ask for (a command inside the deadband asks for none, at once)
         first = self._ctrl_adr[robot]
         self._thruster_outputs[robot] = np.asarray(thrusters, float).copy()
-        normalised = self._specs[robot].vehicle.thruster.normalised_thrust(thrusters)
-        self.data.ctrl[first : first + len(thrusters)] = normalised
+        normalised = self._plants[robot].thruster.normalised_thrust(thrusters)
+        self.data.ctrl[first : first + len(thrusters)] = normalised * self._thruster_gains[robot]
 
     def thruster_outputs(self, robot: str) -> np.ndarray:
         """The thruster commands in [-1, 1] last sent to ``robot``'s thrusters (the mixer's output, after

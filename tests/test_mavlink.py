@@ -20,7 +20,7 @@ import pytest
 from pymavlink import mavutil
 
 from maptidal.cli import main
-from maptidal.controllers.convention import CommandError
+from maptidal.controllers.convention import CommandError, PilotGain, boot_gain
 from maptidal.controllers.mavlink_bridge import BridgeError, BridgeParams, MavlinkBridge, load_signing_key
 from maptidal.controllers.mavlink_wire import (
     ARDUSUB_MODES,
@@ -47,14 +47,14 @@ def free_port() -> int:
 class Served:
     """A SimVehicle of the default scenario running in a thread on udpin:127.0.0.1:PORT."""
 
-    def __init__(self, speedup: float = 1.0, key: bytes | None = None) -> None:
+    def __init__(self, speedup: float = 1.0, key: bytes | None = None, pilot_gain: float = 1.0) -> None:
         self.port = free_port()
         self.sim = Simulation()
         self.sim.reset(seed=0)
         self.vehicle = SimVehicle(
             self.sim,
             url=f"udpin:127.0.0.1:{self.port}",
-            params=SimVehicleParams(speedup=speedup),
+            params=SimVehicleParams(speedup=speedup, pilot_gain=pilot_gain),
             signing_key=key,
         )
         self.vehicle.open()
@@ -129,6 +129,38 @@ def test_one_action_gives_the_same_thruster_outputs_through_the_mixer_and_over_m
             assert wait_until(lambda p=pwm: np.allclose(bridge.telemetry.servo_pwm[: len(p)], p, atol=2.0))
 
 
+@pytest.mark.parametrize("gain", [1.0, 0.5])
+def test_one_action_sequence_gives_the_same_pwm_through_the_gym_env_and_the_sim_vehicle(gain):
+    """The same pilot actions, flown in MANUAL at the same pilot gain, through the Gymnasium environment
+    and through ``sim-vehicle`` over MAVLink: the env's thruster outputs, taken to PWM as ArduSub does,
+    equal the vehicle's SERVO_OUTPUT_RAW. (tests/test_sitl.py checks ArduSub SITL's own PWM against the
+    same mixer where ARDUSUB_SITL is set.)"""
+    import gymnasium
+
+    import maptidal.envs  # noqa: F401
+
+    actions = [
+        [0.6, 0.0, 0.0, 0.0, 0.0, -0.3],
+        [0.0, -0.5, 0.4, 0.2, 0.0, 0.0],
+        [-0.2, 0.0, -0.6, 0.0, 0.7, 0.0],
+    ]
+    env = gymnasium.make("MapTidal/GoToPose-v1", flight_mode="manual", pilot_gain=gain)
+    env.reset(seed=0)
+    through_env = []
+    for action in actions:
+        env.step(np.asarray(action, np.float32))
+        through_env.append(command_to_pwm(env.unwrapped.sim.thruster_outputs("rov0")))
+    env.close()
+    assert not np.allclose(through_env[0], 1500.0)
+    with Served(speedup=2.0, pilot_gain=gain) as served, MavlinkBridge(served.url) as bridge:
+        bridge.set_mode("manual")
+        bridge.arm()
+        for action, pwm in zip(actions, through_env, strict=True):
+            bridge.set_command(action)
+            # MANUAL_CONTROL carries each axis in thousandths: within a microsecond or two of PWM
+            assert wait_until(lambda p=pwm: np.allclose(bridge.telemetry.servo_pwm[: len(p)], p, atol=2.0))
+
+
 # ----- end to end -------------------------------------------------------------------------------------
 def test_end_to_end_depth_hold_and_a_waypoint_over_udp(tmp_path):
     """maptidal mavlink flies the simulated vehicle over loopback UDP: arm, hold 1.0 m, fly 1 m north at
@@ -161,6 +193,46 @@ def _run_cli_to(path, argv) -> int:
         code = main(argv)
     path.write_text(buffer.getvalue())
     return code
+
+
+# ----- the pilot gain -----------------------------------------------------------------------------------
+def test_the_bridge_flies_only_a_vehicle_at_the_gain_its_controller_expects():
+    with Served(speedup=2.0) as full, MavlinkBridge(full.url) as bridge:
+        assert bridge.check_pilot_gain(PilotGain(1.0)) == 1.0
+        assert bridge.read_param("JS_GAIN_STEPS") == 4.0
+        with pytest.raises(BridgeError, match="JS_THR_GAIN 1;"):  # heave scaled otherwise than expected
+            bridge.check_pilot_gain(PilotGain(1.0, throttle_gain=1.5))
+    with Served(speedup=2.0, pilot_gain=0.5) as half, MavlinkBridge(half.url) as bridge:
+        assert bridge.check_pilot_gain(PilotGain(0.5)) == 0.5  # a policy trained at ArduSub's default
+        with pytest.raises(BridgeError, match=r"gain of 0\.50 \(JS_GAIN_DEFAULT 0\.5.*reboot"):
+            bridge.check_pilot_gain(PilotGain(1.0))
+        assert half.vehicle.parameters["JS_GAIN_DEFAULT"] == 0.5  # nothing written unless asked
+        with pytest.raises(BridgeError, match="reboot the vehicle, then connect again"):
+            bridge.check_pilot_gain(PilotGain(1.0, throttle_gain=1.5), write=True)
+        written = half.vehicle.parameters
+        assert (written["JS_GAIN_DEFAULT"], written["JS_THR_GAIN"]) == (1.0, 1.5)
+        assert written["JS_GAIN_MAX"] >= 1.0 and written["JS_GAIN_MIN"] <= 1.0
+        assert half.vehicle.pilot_gain.gain == 0.5  # ArduSub takes the gain at boot, as the simulator
+    # a vehicle booted with what was written flies at the new gain
+    booted = boot_gain(written["JS_GAIN_DEFAULT"], written["JS_GAIN_MIN"], written["JS_GAIN_MAX"], 4)
+    assert booted == 1.0
+
+
+def test_an_unanswered_parameter_is_a_clear_error():
+    with (
+        Served(speedup=2.0) as served,
+        MavlinkBridge(served.url) as bridge,
+        pytest.raises(BridgeError, match="NO_SUCH_PARAM"),
+    ):
+        bridge.read_param("NO_SUCH_PARAM", timeout_s=0.6)
+
+
+def test_maptidal_mavlink_refuses_a_vehicle_at_half_gain_without_arming(tmp_path, capsys):
+    with Served(pilot_gain=0.5) as served:
+        code = main(["mavlink", "--connect", served.url, "--mode", "depth-hold", "--depth", "1.0"])
+        assert code == 2 and not served.vehicle.armed
+    message = capsys.readouterr().err
+    assert "JS_GAIN_DEFAULT" in message and "0.50" in message and len(message.strip().splitlines()) == 1
 
 
 # ----- failsafes ----------------------------------------------------------------------------------------

@@ -24,6 +24,8 @@ from maptidal.camera import StereoCameraParams
 from maptidal.controllers.convention import PilotGain
 from maptidal.controllers.estimation import rotation_from_rpy, wrap_angle
 from maptidal.controllers.flight_modes import FLIGHT_MODES, ModeParams
+from maptidal.envs import randomization
+from maptidal.envs.randomization import Randomization
 from maptidal.envs.scenario import Scenario, check_current, inside_tank, load_scenario, with_frame
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.views import third_person_frame
@@ -62,6 +64,9 @@ class EnvOptions:
     # (None: the default), "manual", "alt_hold" (the heave stick a climb rate) or "poshold" (needs a
     # DVL); with action="thrusters" there is none: the commands go straight to the thrusters
     flight_mode: str | None = None
+    # domain randomisation per episode (maptidal.envs.randomization): None, True (every key at its
+    # default range) or a dict of key to (low, high) or one number
+    randomize: object = None
 
     def __post_init__(self) -> None:
         if self.action not in ACTIONS:
@@ -96,6 +101,12 @@ class EnvOptions:
             PilotGain(self.pilot_gain)
         except ValueError as error:
             raise ValueError(f"pilot_gain: {error}") from None
+        Randomization.from_option(self.randomize)  # raises on an unknown key or a range outside physics
+
+    @property
+    def randomization(self) -> Randomization | None:
+        """What ``randomize`` asks for, checked (None: nothing is randomised)."""
+        return Randomization.from_option(self.randomize)
 
     def simulation(self, scenario: Scenario) -> Simulation:
         """The simulation these options fly: the pilot action through ``flight_mode`` (STABILIZE unless
@@ -302,6 +313,7 @@ class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
         "_previous",
         "mean_current",
         "gust",
+        "randomization_draw",
     )
 
     metadata: ClassVar[dict] = {
@@ -344,6 +356,8 @@ class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
         else:
             self.observation_space = self._dict_space
         self.sim.track_estimate(self.robot)  # the observation's estimate, in MANUAL too
+        self.randomization = self.options.randomization
+        self.randomization_draw: dict = {}
         self._steps = 0
         self._energy = self._contact_s = 0.0
         self.episode = EpisodeState()
@@ -384,17 +398,30 @@ class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
         - ``"current"``: the water current for the episode, ``(vx, vy, vz)`` m/s (StationKeeping's
           turbulence still blows about it).
 
-        Anything else, or a value out of range, raises ValueError before the episode changes."""
+        Anything else, or a value out of range, raises ValueError before the episode changes.
+
+        With ``randomize``, the vehicle, sensors and water are drawn first
+        (:mod:`maptidal.envs.randomization`), and the draw is ``info["randomization"]``; a current
+        given here, or drawn by the task itself (StationKeeping), replaces a drawn one."""
         chosen = self._checked_reset_options(options)
         super().reset(seed=seed)
         self.sim.reset(seed=int(self.np_random.integers(2**31 - 1)))
         self._steps = 0
+        info = self._randomize_episode()
         current = chosen.pop("current", None)
         self._start_episode(**chosen)  # placing the robot restarts the simulation's estimator there
         if current is not None:
             self._set_episode_current(current)
         self.episode.started()
-        return self._observation(), {}
+        return self._observation(), info
+
+    def _randomize_episode(self) -> dict:
+        """Draw and apply this episode's randomisation (none without ``randomize``); reset's info."""
+        if self.randomization is None:
+            return {}
+        self.randomization_draw = self.randomization.sample(self.np_random, self.vehicle.n_thrusters)
+        randomization.apply(self.sim, self.robot, self.randomization_draw)
+        return {"randomization": copy.deepcopy(self.randomization_draw)}
 
     def _checked_reset_options(self, options: dict | None) -> dict:
         """``reset``'s options, checked (its docstring), as arrays: pose and target as (position, yaw)."""

@@ -82,11 +82,16 @@ class GoToPoseEnv(PoseTargetEnv):
     ## Arguments
 
     ``gymnasium.make("MapTidal/GoToPose-v1", action="pilot", flat_obs=False, obs_images=None,
-    image_size=(80, 128), control_period_s=0.1, episode_s=20.0, frame="heavy", scenario=None,
-    render_mode=None, pilot_gain=1.0, flight_mode=None)``. ``flight_mode``: the ArduSub mode a pilot
+    image_size=(80, 128), control_period_s=0.1, frame="heavy", scenario=None, render_mode=None,
+    pilot_gain=1.0, flight_mode=None, randomize=None, max_episode_steps=200)``; the class itself takes
+    ``episode_s=20.0`` instead of ``max_episode_steps``. ``flight_mode``: the ArduSub mode a pilot
     action is flown in, "stabilize" (the default), "manual", "alt_hold" (heave a climb rate) or
     "poshold" (needs a DVL). ``pilot_gain``: ArduSub's JS_GAIN, which scales surge, sway, heave and yaw
     as MANUAL_CONTROL is scaled on a vehicle (1: full authority at 1; ArduSub's default is 0.5).
+    ``randomize``: domain randomisation per episode (:mod:`maptidal.envs.randomization`): True draws
+    the vehicle's mass, buoyancy, centre of buoyancy, damping, added mass, thrusters, voltage, the
+    current, sensor noise and turbidity from cited ranges; a dict draws the keys it names, from
+    ``(low, high)`` or fixed at one number. The draw is ``reset``'s ``info["randomization"]``.
 
     ## Version history
 

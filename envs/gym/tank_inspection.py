@@ -113,7 +113,8 @@ class TankInspectionEnv(MapTidalEnv):
 
     ## Arguments
 
-    Those of ``MapTidal/GoToPose-v1`` (``episode_s`` defaults to 60 s here), and ``voxel_m=0.05``.
+    Those of ``MapTidal/GoToPose-v1`` (``max_episode_steps`` 600 and ``episode_s`` 60 s here), and
+    ``voxel_m=0.05``.
 
     ## Version history
 

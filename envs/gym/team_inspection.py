@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from typing import ClassVar
@@ -24,6 +25,7 @@ from maptidal.envs.gym.core import (
     Restorable,
 )
 from maptidal.envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
+from maptidal.envs.randomization import apply as apply_randomization
 from maptidal.envs.scenario import Scenario, load_scenario, with_frame
 from maptidal.envs.views import third_person_frame
 
@@ -87,7 +89,8 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
     ## Arguments
 
     ``n_robots=2`` (1 to 4), ``action`` ("pilot", "thrusters" or "tasks"), ``task_timeout_s=30``, and
-    those of ``MapTidal/GoToPose-v1`` (``episode_s`` defaults to 60 s).
+    those of ``MapTidal/GoToPose-v1`` (``max_episode_steps`` 600 and ``episode_s`` 60 s; ``randomize``
+    draws each robot its own vehicle and sensors, and one water).
 
     ## Version history
 
@@ -98,7 +101,13 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012 (Gymnasium's convention)
     # what a saved state carries besides the simulation's (Restorable): the step count, the tasks done,
     # the episode's start, the go-to-pose controllers' integrators of the tasks mode
-    _STATE_ATTRIBUTES: ClassVar[tuple[str, ...]] = ("_steps", "tasks_done", "_episode_start", "_controllers")
+    _STATE_ATTRIBUTES: ClassVar[tuple[str, ...]] = (
+        "_steps",
+        "tasks_done",
+        "_episode_start",
+        "_controllers",
+        "randomization_draw",
+    )
 
     def __init__(
         self,
@@ -114,6 +123,7 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
         self.render_mode = render_mode
         self._renderer = None
         self.tasks_mode = options.get("action") == "tasks"
+        self.randomization_draw: dict = {}
         self._steps_are_periods = not self.tasks_mode  # a task step lasts as long as its task (EpisodeLength)
         if self.tasks_mode:
             options = {**options, "action": "pilot"}
@@ -188,6 +198,18 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
         super().reset(seed=seed)
         self.sim.reset(seed=int(self.np_random.integers(2**31 - 1)))
         self._steps = 0
+        info = {}
+        randomization = self.options.randomization
+        if randomization is not None:  # each robot its own vehicle and sensors; one water, one current
+            self.randomization_draw = {
+                name: randomization.sample(self.np_random, self.vehicle.n_thrusters) for name in self.agents
+            }
+            for draw in list(self.randomization_draw.values())[1:]:
+                for shared in ("current_m_s", "current_heading_rad", "turbidity"):
+                    draw.pop(shared, None)
+            for name, draw in self.randomization_draw.items():
+                apply_randomization(self.sim, name, draw)
+            info = {"randomization": copy.deepcopy(self.randomization_draw)}
         low, high = SAFE_BOX
         placed: list[np.ndarray] = []
         for name in self.agents:
@@ -204,7 +226,7 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
             controller.reset()  # no integral carried over from the last episode
         self._look()
         self.episode.started()
-        return self._observation(), {}
+        return self._observation(), info
 
     def step(self, action):
         """Hold each robot's action for one control period (with ``action="tasks"``: fly each robot to

@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from maptidal.cli.common import RunError, finite_float, pilot_gain, positive_float
+from maptidal.controllers.convention import PilotGain, boot_gain
+from maptidal.controllers.mavlink_bridge import GAIN_PARAMETERS, BridgeError
 
 MAX_WAYPOINTS = 1000
 CONTROL_PERIOD_S = 0.05  # 20 Hz, the bridge's streaming rate
@@ -53,7 +55,10 @@ def register(commands) -> None:
         "its state (status) or fly it (fly, the default): hold a depth and heading (--mode depth-hold "
         "--depth M), or fly a list of waypoints (--waypoints FILE), with maptidal's feedback controllers "
         "on the vehicle's telemetry, streaming the pilot command at 20 Hz. The vehicle flies STABILIZE "
-        "underneath. On exit, Ctrl-C, SIGTERM or an error it sends neutral and disarms.",
+        "underneath. Before flying it checks that the vehicle's pilot gain (JS_GAIN_DEFAULT within "
+        "JS_GAIN_MIN/MAX, and JS_THR_GAIN) is 1, as the controllers are tuned in the simulator, and "
+        "refuses to fly otherwise (--write-gain sets them; ArduSub takes them at its next boot). On exit, "
+        "Ctrl-C, SIGTERM or an error it sends neutral and disarms.",
     )
     mavlink.add_argument("action", nargs="?", choices=("fly", "status"), default="fly", help="default: fly")
     mavlink.add_argument(
@@ -100,6 +105,12 @@ def register(commands) -> None:
         "--signing-key-file",
         metavar="FILE",
         help="MAVLink 2 signing key (32 bytes or 64 hex digits); or set $MAPTIDAL_MAVLINK_KEY",
+    )
+    mavlink.add_argument(
+        "--write-gain",
+        action="store_true",
+        help="when the vehicle's pilot gain is not 1, set JS_GAIN_DEFAULT 1 (JS_GAIN_MAX at least 1) and "
+        "JS_THR_GAIN 1, then stop: reboot the vehicle for ArduSub to take them",
     )
     mavlink.add_argument("--json", action="store_true", help="print the result as JSON")
     mavlink.set_defaults(handler=run_mavlink)
@@ -183,7 +194,6 @@ def load_waypoints(path: str | Path) -> list[dict]:
 def run_mavlink(args: argparse.Namespace) -> int:
     """Handler of ``maptidal mavlink``."""
     from maptidal.controllers.mavlink_bridge import (
-        BridgeError,
         BridgeParams,
         MavlinkBridge,
         install_signal_handlers,
@@ -211,7 +221,12 @@ def run_mavlink(args: argparse.Namespace) -> int:
         raise RunError(str(error)) from None
     install_signal_handlers()
     try:
-        result = _status(bridge) if args.action == "status" else _fly(bridge, args, waypoints)
+        if args.action == "status":
+            result = _status(bridge)
+        else:
+            # the controllers are tuned at full authority, as the simulator flies by default
+            bridge.check_pilot_gain(PilotGain(1.0), write=args.write_gain)
+            result = _fly(bridge, args, waypoints)
     except BridgeError as error:
         raise RunError(str(error)) from None
     finally:
@@ -226,6 +241,13 @@ def run_mavlink(args: argparse.Namespace) -> int:
 
 def _status(bridge, listen_s: float = 2.0) -> dict:
     time.sleep(listen_s)
+    try:
+        js = {name: bridge.read_param(name, timeout_s=1.0) for name in GAIN_PARAMETERS}
+        bounds = (js["JS_GAIN_DEFAULT"], js["JS_GAIN_MIN"], js["JS_GAIN_MAX"], int(js["JS_GAIN_STEPS"]))
+        gain = round(boot_gain(*bounds), 3)
+        throttle_gain = js["JS_THR_GAIN"]
+    except BridgeError:  # a vehicle without ArduSub's joystick parameters
+        gain = throttle_gain = None
     t = bridge.telemetry
     roll, pitch, yaw = (math.degrees(v) for v in t.attitude_ned)
     return {
@@ -236,6 +258,8 @@ def _status(bridge, listen_s: float = 2.0) -> dict:
         "depth_m": None if t.depth_m is None else round(t.depth_m, 3),
         "position_ned_m": None if t.position_ned is None else [round(v, 3) for v in t.position_ned],
         "servo_pwm_us": list(t.servo_pwm[:8]),
+        "pilot_gain": gain,
+        "throttle_gain": throttle_gain,
         "messages": t.messages,
         "bad_packets": t.bad_packets,
     }
