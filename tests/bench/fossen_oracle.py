@@ -175,7 +175,7 @@ def simulate(
         D = np.diag(vehicle.d_lin + vehicle.d_quad * np.abs(nu_r))
         f_g = R.T @ np.array([0.0, 0.0, -weight])
         f_b = R.T @ np.array([0.0, 0.0, vehicle.buoyancy])
-        g = -np.concatenate([f_g + f_b, np.cross(vehicle.r_b, f_b)])
+        g = -np.concatenate([f_g + f_b, skew(vehicle.r_b) @ f_b])
         force = np.where(act >= 0.0, act * MAX_16V_N[0], act * MAX_16V_N[1])
         tau = np.concatenate(
             [
@@ -186,7 +186,7 @@ def simulate(
         coriolis = (C_RB + (C_A if added_mass_coriolis else 0.0)) @ nu_r
         nudot_r = np.linalg.solve(M, tau - coriolis - D @ nu_r - g)
         # nu = nu_r + [R^T v_c; 0], and d/dt (R^T v_c) = -w x (R^T v_c)
-        nudot = nudot_r - np.concatenate([np.cross(w, v_c_body), np.zeros(3)])
+        nudot = nudot_r - np.concatenate([skew(w) @ v_c_body, np.zeros(3)])
         qdot = 0.5 * np.array(
             [
                 -q[1] * w[0] - q[2] * w[1] - q[3] * w[2],
@@ -201,6 +201,7 @@ def simulate(
     state[3:7] = initial_quaternion
     state[7:13] = initial_velocity
     t_eval = np.arange(0.0, duration + 1e-9, dt)
-    sol = solve_ivp(rhs, (0.0, duration), state, t_eval=t_eval, max_step=0.002, rtol=1e-8, atol=1e-10)
+    # RK45 chooses its own steps for rtol 1e-8 (the thrust's lag and the commands are smooth after t = 0)
+    sol = solve_ivp(rhs, (0.0, duration), state, t_eval=t_eval, rtol=1e-8, atol=1e-10)
     quaternions = sol.y[3:7].T / np.linalg.norm(sol.y[3:7].T, axis=1, keepdims=True)
     return sol.t, sol.y[:3].T, quaternions, sol.y[7:13].T
