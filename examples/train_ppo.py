@@ -1,11 +1,15 @@
-"""Train Stable-Baselines3 PPO on MapTidal/GoToPose-v1, report the success rate, and plot the learning
-curve.
+"""Train Stable-Baselines3 PPO on MapTidal/GoToPose-v1 (or StationKeeping-v1), with or without domain
+randomisation, then evaluate it against the scripted controller on the nominal vehicle, on randomised
+vehicles and on one shifted vehicle (the sim-to-real question: does the policy hold up on a vehicle
+that is not the simulator's?).
 
     pip install -e .[rl]          # stable-baselines3 and torch 2.13.0 (CPU), outside the default install
     python examples/train_ppo.py --timesteps 200000 --envs 2 --out runs/ppo
+    python examples/train_ppo.py --randomize --out runs/ppo-randomized
 
-Writes ``learning_curve.png`` (mean episode return and success rate against environment steps) and
-``result.json`` (the curve, the evaluation's success rate and the settings) into ``--out``.
+Writes ``learning_curve.png`` (mean episode return and success rate against environment steps),
+``evaluation.png`` (mean return per condition, PPO beside the scripted controller) and ``result.json``
+(the curve, the evaluations and the settings) into ``--out``.
 """
 
 from __future__ import annotations
@@ -22,18 +26,39 @@ import gymnasium
 import numpy as np
 
 import maptidal.envs  # noqa: F401  (registers MapTidal/)
+from maptidal.envs.gym.scripted import scripted_pose
 from maptidal.files import atomic_write_bytes
 from maptidal.progress import ProgressBar
 
-ENV_ID = "MapTidal/GoToPose-v1"
+ENV_IDS = {"go_to_pose": "MapTidal/GoToPose-v1", "station_keeping": "MapTidal/StationKeeping-v1"}
+EPISODE_STEPS = 120  # 12 s episodes
+# where a trained policy is evaluated: the simulator's own vehicle, vehicles drawn from every default
+# range (maptidal.envs.randomization), and one vehicle that differs the way a real one might: a battery
+# half drained, more drag and added mass than identified, a tired thruster set, slower thrust, a heavier
+# payload and a little current
+CONDITIONS: dict[str, object] = {
+    "nominal": None,
+    "randomized": True,
+    "shifted": {
+        "voltage_v": 13.0,
+        "damping_scale": 1.5,
+        "added_mass_scale": 1.2,
+        "thruster_gain": 0.9,
+        "thruster_lag_s": 0.15,
+        "mass_scale": 1.03,
+        "current_m_s": 0.05,
+    },
+}
 
 
-def make_env(seed: int):
-    """A factory of one flat-observation GoToPose environment, monitored for returns and success."""
+def make_env(env_id: str, seed: int, randomize: bool):
+    """A factory of one flat-observation environment, monitored for returns and success."""
     from stable_baselines3.common.monitor import Monitor
 
     def build():
-        made = gymnasium.make(ENV_ID, flat_obs=True, max_episode_steps=120)  # 12 s episodes
+        made = gymnasium.make(
+            env_id, flat_obs=True, max_episode_steps=EPISODE_STEPS, randomize=True if randomize else None
+        )
         env = Monitor(made, info_keywords=("is_success",))
         env.reset(seed=seed)
         return env
@@ -41,25 +66,31 @@ def make_env(seed: int):
     return build
 
 
-def evaluate(model, episodes: int, seed: int) -> float:
-    """Share of new episodes in which the deterministic policy reaches the pose (within tolerance)."""
-    env = gymnasium.make(ENV_ID, flat_obs=True, max_episode_steps=120)
-    reached = 0
+def evaluate(env_id: str, act, episodes: int, seed: int, randomize, flat: bool) -> dict:
+    """Mean and spread of the return and the success rate of ``act`` (observation to action) over
+    ``episodes`` new episodes under the randomisation ``randomize``; every policy meets the same
+    episodes (seeds ``seed`` onwards)."""
+    env = gymnasium.make(env_id, flat_obs=flat, max_episode_steps=EPISODE_STEPS, randomize=randomize)
+    returns, reached = [], 0
     for k in range(episodes):
         observation, _ = env.reset(seed=seed + k)
-        done, success = False, False
+        done, success, total = False, False, 0.0
         while not done:
-            action, _ = model.predict(observation, deterministic=True)
-            observation, _, terminated, truncated, info = env.step(action)
+            observation, reward, terminated, truncated, info = env.step(act(observation))
             success |= info["is_success"]
+            total += float(reward)
             done = terminated or truncated
+        returns.append(total)
         reached += success
     env.close()
-    return reached / episodes
+    mean, spread = float(np.mean(returns)), float(np.std(returns))
+    return {"return_mean": mean, "return_std": spread, "success": reached / episodes}
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env", choices=sorted(ENV_IDS), default="go_to_pose", help="the task")
+    parser.add_argument("--randomize", action="store_true", help="train with domain randomisation")
     parser.add_argument("--timesteps", type=int, default=200_000, help="environment steps to train")
     parser.add_argument("--envs", type=int, default=2, help="parallel environments (subprocesses)")
     parser.add_argument("--seed", type=int, default=0)
@@ -92,31 +123,73 @@ def main() -> int:
             self.bar.advance(self.training_env.num_envs)
             return True
 
-    vec = SubprocVecEnv([make_env(args.seed + k) for k in range(args.envs)])
+    env_id = ENV_IDS[args.env]
+    vec = SubprocVecEnv([make_env(env_id, args.seed + k, args.randomize) for k in range(args.envs)])
     model = PPO("MlpPolicy", vec, n_steps=1024, batch_size=256, gamma=0.99, seed=args.seed, verbose=0)
     curve = Curve()
     model.learn(total_timesteps=args.timesteps, callback=curve)
     vec.close()
-    success = evaluate(model, args.eval_episodes, 10_000)
+    policies = {
+        "ppo": (lambda observation: model.predict(observation, deterministic=True)[0], True),
+        "scripted": (lambda observation: scripted_pose(observation).astype(np.float32), False),
+    }
+    evaluations = {
+        condition: {
+            name: evaluate(env_id, act, args.eval_episodes, 10_000, randomize, flat)
+            for name, (act, flat) in policies.items()
+        }
+        for condition, randomize in CONDITIONS.items()
+    }
     points = np.array(curve.points) if curve.points else np.zeros((0, 3))
     result = {
-        "env": ENV_ID,
+        "env": env_id,
+        "randomized_training": args.randomize,
         "timesteps": args.timesteps,
         "envs": args.envs,
         "seed": args.seed,
         "eval_episodes": args.eval_episodes,
-        "eval_success_rate": success,
+        "conditions": {name: value for name, value in CONDITIONS.items()},
+        "evaluations": evaluations,
         "curve": [{"step": int(s), "return": r, "success": bool(k)} for s, r, k in points],
     }
     atomic_write_bytes(args.out / "result.json", json.dumps(result, indent=2).encode())
-    plot(points, success, args.out / "learning_curve.png")
-    print(
-        f"success rate over {args.eval_episodes} new episodes: {success:.0%}; {args.out}/learning_curve.png"
-    )
+    title = f"PPO on {env_id}" + (" (randomised)" if args.randomize else "")
+    plot(points, evaluations["nominal"]["ppo"]["success"], args.out / "learning_curve.png", title)
+    plot_evaluations(evaluations, args.out / "evaluation.png", title)
+    for condition, rows in evaluations.items():
+        cells = ", ".join(
+            f"{name} {row['return_mean']:.1f} +- {row['return_std']:.1f} ({row['success']:.0%} reached)"
+            for name, row in rows.items()
+        )
+        print(f"{condition}: {cells}")
     return 0
 
 
-def plot(points: np.ndarray, success: float, path: Path) -> None:
+def plot_evaluations(evaluations: dict, path: Path, title: str) -> None:
+    """Mean return (with its spread) per evaluation condition, the policy beside the scripted controller."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    conditions = list(evaluations)
+    x = np.arange(len(conditions))
+    fig, axis = plt.subplots(figsize=(6, 4), dpi=120)
+    bars = (("ppo", "tab:blue", -0.18), ("scripted", "tab:gray", 0.18))
+    for name, colour, offset in bars:
+        means = [evaluations[c][name]["return_mean"] for c in conditions]
+        spreads = [evaluations[c][name]["return_std"] for c in conditions]
+        axis.bar(x + offset, means, 0.36, yerr=spreads, color=colour, label=name, capsize=3)
+    axis.set_xticks(x, conditions)
+    axis.set_ylabel("episode return (mean, +- std)")
+    axis.set_title(f"{title}: evaluation")
+    axis.legend()
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot(points: np.ndarray, success: float, path: Path, title: str) -> None:
     """Mean return and success rate over a sliding window of 20 episodes."""
     import matplotlib
 
@@ -135,7 +208,7 @@ def plot(points: np.ndarray, success: float, path: Path) -> None:
         right.set_ylabel(f"success rate ({window}-episode mean)")
     left.set_xlabel("environment steps")
     left.set_ylabel("episode return")
-    left.set_title(f"PPO on {ENV_ID}: evaluation success {success:.0%}")
+    left.set_title(f"{title}: evaluation success {success:.0%}")
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

@@ -8,27 +8,12 @@ import gymnasium
 import numpy as np
 
 import maptidal.envs  # noqa: F401  (registers the environments)
+from maptidal.envs.gym.scripted import scripted_pose
 
 ENDINGS = ("surface", "dive", "ram")
 POLICIES = ("nothing", *ENDINGS, "scripted")
 # pilot commands (surge, sway, heave, roll, pitch, yaw): full heave up, full heave down, full surge
 _FIXED = {"nothing": np.zeros(6), "surface": np.eye(6)[2], "dive": -np.eye(6)[2], "ram": np.eye(6)[0]}
-
-
-def scripted_pose(observation) -> np.ndarray:
-    """A proportional-derivative controller on the observed target (forward, left, up offsets in the
-    heading frame and the yaw error, counter-clockwise) and the body velocity."""
-    forward, left, up, yaw = (float(v) for v in observation["target"])
-    velocity = observation["velocity"]
-    command = [
-        1.5 * forward - 1.0 * velocity[0],
-        -(1.5 * left - 1.0 * velocity[1]),  # pilot sway is right +
-        1.5 * up - 1.0 * velocity[2],
-        0.0,
-        0.0,
-        -(1.0 * yaw - 0.3 * velocity[5]),  # pilot yaw is turn right +
-    ]
-    return np.clip(command, -1.0, 1.0)
 
 
 def scripted_look_around(observation, depth_m: float) -> np.ndarray:

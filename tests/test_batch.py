@@ -18,7 +18,15 @@ import pytest
 from cli_helpers import assert_one_line_error, run_maptidal
 
 from maptidal.executors import run_jobs
-from maptidal.mission.batch import METRICS, WALL_CLOCK, aggregate, mission_metrics, parse_seeds
+from maptidal.mission.batch import (
+    METRICS,
+    WALL_CLOCK,
+    aggregate,
+    mission_metrics,
+    parse_planners,
+    parse_seeds,
+    run_batch,
+)
 from maptidal.mission.config import DEFAULT_MISSION as MISSION_FILE
 
 
@@ -148,7 +156,7 @@ def test_a_batch_gives_the_same_numbers_locally_and_on_ray(tmp_path, ray_cluster
         assert {k: row[k] for k in expected} == expected
         assert row["tasks_found"] > 0 and row["messages"] > 0
     csv_lines = (tmp_path / "local" / "batch.csv").read_text().splitlines()
-    assert csv_lines[0].startswith("seed,folder,finished") and len(csv_lines) == 3
+    assert csv_lines[0].startswith("planner,seed,folder,finished") and len(csv_lines) == 3
     assert (tmp_path / "local" / "batch.png").stat().st_size > 0
     assert "| tasks_found |" in (tmp_path / "local" / "batch.md").read_text()
     assert "| tasks_found |" in local.stdout
@@ -161,10 +169,34 @@ def test_a_batch_gives_the_same_numbers_locally_and_on_ray(tmp_path, ray_cluster
         (["--ray-address", "127.0.0.1:1"], "needs --executor ray"),
         (["--jobs", "0"], "must be at least 1"),
         (["--duration", "-5"], "must be greater than 0"),
+        (["--planners", "voronoi,greedy"], "unknown planner 'greedy'"),
+        (["--seeds", ""], "bad seeds"),
     ],
 )
 def test_bad_batch_arguments_give_one_line(tmp_path, arguments, message):
     assert_one_line_error(run_maptidal("batch", *arguments, "--out", tmp_path / "b"), message)
+
+
+def test_parse_planners():
+    assert parse_planners("all") == ["maptidal", "voronoi", "boustrophedon"]
+    assert parse_planners("voronoi, maptidal") == ["voronoi", "maptidal"]
+    for bad in ("greedy", "voronoi,voronoi", ""):
+        with pytest.raises(ValueError):
+            parse_planners(bad)
+
+
+def test_each_planner_flies_each_seed_and_the_table_sets_them_side_by_side(tmp_path):
+    rows, summary = run_batch(
+        None, [1], tmp_path, duration_s=8.0, planners=["voronoi", "boustrophedon"], progress=False
+    )
+    assert [(row["planner"], row["seed"]) for row in rows] == [("voronoi", 1), ("boustrophedon", 1)]
+    assert set(summary) == {"voronoi", "boustrophedon"}
+    for row in rows:
+        assert (tmp_path / row["folder"] / "mission.json").is_file()  # voronoi/seed_001, ...
+        assert summary[row["planner"]]["tasks_found"]["mean"] == row["tasks_found"]
+    table = (tmp_path / "batch.md").read_text()
+    assert "| metric | unit | voronoi | boustrophedon |" in table
+    assert (tmp_path / "batch.png").stat().st_size > 0
 
 
 def test_a_bad_mission_file_fails_before_any_run(tmp_path):

@@ -31,6 +31,21 @@ def short_mission(tmp_path_factory):
     return mission, document, out
 
 
+def test_a_mission_cut_off_by_its_cap_says_what_was_left(short_mission):
+    _, document, out = short_mission
+    done = sum(1 for t in document["tasks"] if t["completed"])
+    open_tasks = len(document["tasks"]) - done  # in 45 s nobody has given a task up
+    assert not document["finished"]
+    assert document["ending"].startswith(f"not finished at the {document['sim_time_s']:.1f} s cap")
+    assert (
+        f"{open_tasks} of {len(document['tasks'])} known tasks neither done nor given up"
+        in document["ending"]
+    )
+    end = [e for e in read_events(out) if e["kind"] == "end"]
+    assert end[-1]["ending"] == document["ending"]
+    assert f"| ended | {document['ending']} |" in (out / "report.md").read_text()
+
+
 def test_a_short_mission_discovers_allocates_and_completes_tasks(short_mission):
     mission, document, out = short_mission
     tasks = document["tasks"]
@@ -170,6 +185,7 @@ def test_a_killed_mission_leaves_a_log_the_report_rebuilds(tmp_path):
     assert done.returncode == 0, done.stderr
     rebuilt = json.loads((tmp_path / "mission.json").read_text())
     assert rebuilt["rebuilt_from_events"] and not rebuilt["finished"]
+    assert rebuilt["ending"] == "killed before its end: rebuilt from the event log"
     assert any(t["completed"] for t in rebuilt["tasks"])
     done_events = [e["task"] for e in read_events(tmp_path) if e["kind"] == "done"]
     assert rebuilt["duplicate_inspections"] == len(done_events) - len(set(done_events))
@@ -461,6 +477,10 @@ def test_after_a_failure_the_survivor_finishes_every_task_and_the_mission_ends(t
     )
     document = Mission(scenario, params, tmp_path).run()
     assert document["finished"] and document["sim_time_s"] < 450.0
+    assert document["ending"] == (
+        f"finished at {document['sim_time_s']:.1f} s: every robot explored and every known task was done or "
+        "given up"
+    )
     events = read_events(tmp_path)
     # every task is done, or given up by the survivor with its reason in the log: declined (a view it
     # cannot pitch to) or timed out (since session 15, two views a hull's width from the ladder's rails)

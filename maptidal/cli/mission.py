@@ -46,6 +46,14 @@ def register(commands) -> None:
         "--pose", choices=("truth", "dr", "vo"), help="pose source of the front end (default vo)"
     )
     run.add_argument(
+        "--planner",
+        choices=("maptidal", "voronoi", "boustrophedon"),
+        help="where the tasks come from (default: the scenario's, else maptidal): maptidal discovers them "
+        "on the robots' own meshes as they fly; voronoi and boustrophedon are the paper's baselines, "
+        "whose viewpoints are planned a priori from the tank model and known to every robot from the "
+        "start, flown with the same robots, controllers, channel and CBBA",
+    )
+    run.add_argument(
         "--video",
         action="store_true",
         help="also write mission.mp4: a camera behind the team with each robot's view inset, two frames "
@@ -90,6 +98,12 @@ def register(commands) -> None:
     batch.add_argument(
         "--pose", choices=("truth", "dr", "vo"), help="pose source of the front end (default vo)"
     )
+    batch.add_argument(
+        "--planners",
+        metavar="LIST",
+        help="fly each seed with each planner: all, or a comma list of maptidal, voronoi and "
+        "boustrophedon (default: the scenario's planner); batch.md then compares them",
+    )
     add_executor_args(batch, "missions")
     add_output_folder(batch, "runs/batch")
     batch.set_defaults(handler=run_batch_command)
@@ -102,7 +116,9 @@ def run_mission(args: argparse.Namespace) -> int:
     from maptidal.mission.run import Mission
     from maptidal.progress import ProgressBar
 
-    scenario, params = prepare_mission(args.scenario, args.robots, args.duration, args.pose, args.seed)
+    scenario, params = prepare_mission(
+        args.scenario, args.robots, args.duration, args.pose, args.seed, planner=args.planner
+    )
     if args.video:
         params = dataclasses.replace(params, video=True)
     mission = Mission(scenario, params, args.out)
@@ -142,11 +158,18 @@ def run_report(args: argparse.Namespace) -> int:
 
 def run_batch_command(args: argparse.Namespace) -> int:
     """Handler of ``maptidal batch``."""
-    from maptidal.mission.batch import batch_markdown, parse_seeds, run_batch
+    from maptidal.mission.batch import (
+        batch_markdown,
+        parse_planners,
+        parse_seeds,
+        planners_markdown,
+        run_batch,
+    )
 
     check_executor_args(args)
     seeds = parse_seeds(args.seeds)
-    jobs = jobs_for(args, len(seeds), "batch")
+    planners = parse_planners(args.planners) if args.planners else None
+    jobs = jobs_for(args, len(seeds) * len(planners or [None]), "batch")
     rows, summary = run_batch(
         args.scenario,
         seeds,
@@ -157,7 +180,9 @@ def run_batch_command(args: argparse.Namespace) -> int:
         robots=args.robots,
         duration_s=args.duration,
         pose_source=args.pose,
+        planners=planners,
     )
-    print(batch_markdown(summary, len(rows)))
+    several = planners is not None and len(planners) > 1
+    print(planners_markdown(summary, len(seeds)) if several else batch_markdown(summary, len(rows)))
     print(f"files in {args.out}: batch.csv, batch.json, batch.md, batch.png, seed_NNN/")
     return 0

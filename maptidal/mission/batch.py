@@ -9,6 +9,11 @@ lands:
 - at the end, ``batch.json`` (the rows, and the mean, standard deviation, minimum and maximum of every
   metric), ``batch.md`` (the same as a table) and ``batch.png`` (a panel per metric, every seed a dot).
 
+With several planners (``--planners maptidal,voronoi,boustrophedon`` or ``all``) every planner flies
+every seed, each in ``PLANNER/seed_NNN/``; the rows carry the planner, ``batch.json``'s summary is one
+aggregate per planner, ``batch.md`` tabulates their means side by side and ``batch.png`` draws each
+planner's seeds in its own colour.
+
 A mission is a function of its scenario, its settings and its seed alone, so the metrics do not depend on
 the executor, except the wall-clock ones (``realtime_factor``, ``wall_time_s``), which are reported but
 left out of every comparison.
@@ -58,6 +63,24 @@ class BatchRun:
     robots: int | None = None
     duration_s: float | None = None
     pose_source: str | None = None
+    planner: str | None = None
+
+
+def parse_planners(text: str) -> list[str]:
+    """Planners from ``"all"`` or a comma list of ``maptidal``, ``voronoi`` and ``boustrophedon``;
+    ValueError naming the unknown one otherwise."""
+    from maptidal.mission.run import PLANNERS
+
+    if text.strip() == "all":
+        return list(PLANNERS)
+    names = [part.strip() for part in text.split(",")]
+    unknown = [name for name in names if name not in PLANNERS]
+    if unknown:
+        bad = unknown[0] if unknown else ""
+        raise ValueError(f"unknown planner {bad!r} in {text!r}: give all or a comma list of {PLANNERS}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"planners {text!r} repeat a planner")
+    return names
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -79,9 +102,13 @@ def run_one(run: BatchRun) -> dict:
     from maptidal.mission.config import prepare_mission
     from maptidal.mission.run import Mission
 
-    scenario, params = prepare_mission(run.scenario, run.robots, run.duration_s, run.pose_source, run.seed)
+    scenario, params = prepare_mission(
+        run.scenario, run.robots, run.duration_s, run.pose_source, run.seed, planner=run.planner
+    )
     document = Mission(scenario, params, run.out_dir).run()
-    return {"seed": run.seed, "folder": Path(run.out_dir).name, **mission_metrics(document)}
+    folder = Path(run.out_dir)
+    name = folder.name if run.planner is None else f"{folder.parent.name}/{folder.name}"
+    return {"seed": run.seed, "planner": params.planner, "folder": name, **mission_metrics(document)}
 
 
 def aggregate(rows: list[dict]) -> dict:
@@ -106,7 +133,7 @@ def aggregate(rows: list[dict]) -> dict:
 def batch_csv(rows: list[dict]) -> str:
     """The rows as CSV text, a seed per line."""
     buffer = io.StringIO()
-    names = ["seed", "folder", "finished", *METRICS, *WALL_CLOCK]
+    names = ["planner", "seed", "folder", "finished", *METRICS, *WALL_CLOCK]
     writer = csv.DictWriter(buffer, fieldnames=names, extrasaction="ignore")
     writer.writeheader()
     writer.writerows(rows)
@@ -136,6 +163,30 @@ def batch_markdown(summary: dict, runs: int) -> str:
     return "\n".join(lines)
 
 
+def planners_markdown(summaries: dict[str, dict], runs: int) -> str:
+    """Several planners' aggregates side by side: each metric's mean +- std per planner."""
+    planners = list(summaries)
+    lines = [
+        f"# Planners flown in the loop: {', '.join(planners)}, {runs} seeds each",
+        "",
+        "Finished before the time limit: "
+        + ", ".join(f"{p} {s['finished']['count']} of {s['finished']['of']}" for p, s in summaries.items())
+        + ".",
+        "",
+        "| metric | unit | " + " | ".join(planners) + " |",
+        "|---|---|" + "---|" * len(planners),
+    ]
+    for name, unit in METRICS.items():
+        cells = []
+        for planner in planners:
+            figures = summaries[planner][name]
+            spread = "n/a" if figures["mean"] is None else f"{figures['mean']:.3g} +- {figures['std']:.2g}"
+            cells.append(spread)
+        lines.append(f"| {name} | {unit} | " + " | ".join(cells) + " |")
+    lines += ["", "![every seed of every planner](batch.png)", ""]
+    return "\n".join(lines)
+
+
 def plot_batch(rows: list[dict], path: Path) -> None:
     """A panel per metric: every seed a dot, the mean a line, one standard deviation a band."""
     import matplotlib
@@ -146,19 +197,28 @@ def plot_batch(rows: list[dict], path: Path) -> None:
 
     names = ("pct_uninspected", "tasks_found", "tasks_done", "completion_time_s", "bytes", "mad")
     figure, axes = plt.subplots(2, 3, figsize=(11, 6))
-    seeds = [row["seed"] for row in rows]
+    planners = list(dict.fromkeys(row.get("planner") for row in rows))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for axis, name in zip(axes.flat, names, strict=True):
-        values = np.array([math.nan if row[name] is None else row[name] for row in rows], float)
-        axis.plot(seeds, values, "o", ms=4)
-        if np.isfinite(values).any():
-            mean, std = np.nanmean(values), np.nanstd(values)
-            axis.axhline(mean, color="k", lw=1)
-            axis.axhspan(mean - std, mean + std, color="k", alpha=0.1, lw=0)
+        for k, planner in enumerate(planners):
+            mine = [row for row in rows if row.get("planner") == planner]
+            seeds = [row["seed"] for row in mine]
+            values = np.array([math.nan if row[name] is None else row[name] for row in mine], float)
+            colour = colours[k % len(colours)]
+            label = planner if len(planners) > 1 else None
+            axis.plot(seeds, values, "o", ms=4, color=colour, label=label)
+            if np.isfinite(values).any():
+                mean, std = np.nanmean(values), np.nanstd(values)
+                axis.axhline(mean, color=colour, lw=1)
+                axis.axhspan(mean - std, mean + std, color=colour, alpha=0.1, lw=0)
         axis.set_title(f"{name} ({METRICS[name]})", fontsize=9)
         axis.set_xlabel("seed", fontsize=8)
         axis.xaxis.set_major_locator(MaxNLocator(integer=True))
         axis.tick_params(labelsize=8)
-    figure.suptitle(f"Map-TIDAL missions over {len(rows)} seeds (line: mean, band: one std)")
+    if len(planners) > 1:
+        axes.flat[0].legend(fontsize=8)
+    runs = len({row["seed"] for row in rows})
+    figure.suptitle(f"{', '.join(map(str, planners))} over {runs} seeds (line: mean, band: one std)")
     figure.tight_layout()
     save_png(figure, path)
 
@@ -174,26 +234,32 @@ def run_batch(
     duration_s: float | None = None,
     pose_source: str | None = None,
     progress: bool = True,
+    planners: list[str] | None = None,
 ) -> tuple[list[dict], dict]:
-    """Fly a mission per seed (module docstring); returns the rows in seed order and the aggregate.
+    """Fly a mission per seed (module docstring), or per planner and seed; returns the rows in order
+    (planner, then seed) and the aggregate (one per planner with several planners).
 
     The mission file is checked here, before any run starts, so a bad one fails at once."""
     from maptidal.mission.config import prepare_mission
 
     if not seeds:
         raise ValueError("no seeds to run")
-    prepare_mission(scenario, robots, duration_s, pose_source)  # fail fast on a bad file or override
+    several = planners is not None and len(planners) > 1
+    for planner in planners or [None]:  # fail fast on a bad file, override or plan
+        prepare_mission(scenario, robots, duration_s, pose_source, planner=planner)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     runs = [
         BatchRun(
             None if scenario is None else str(Path(scenario).resolve()),
             seed,
-            str((out / f"seed_{seed:03d}").resolve()),
+            str(((out / planner if several else out) / f"seed_{seed:03d}").resolve()),
             robots,
             duration_s,
             pose_source,
+            planner,
         )
+        for planner in planners or [None]
         for seed in seeds
     ]
     bar = ProgressBar(len(runs), "batch", enabled=progress)
@@ -203,8 +269,13 @@ def run_batch(
         atomic_write_text(out / "batch.csv", batch_csv([results[k] for k in sorted(results)]))
         bar.advance(note=f"seed {row['seed']}: {row['tasks_done']}/{row['tasks_found']} tasks done")
     rows = [results[k] for k in sorted(results)]
-    summary = aggregate(rows)
+    if several:
+        summary = {p: aggregate([row for row in rows if row["planner"] == p]) for p in planners}
+        markdown = planners_markdown(summary, len(seeds))
+    else:
+        summary = aggregate(rows)
+        markdown = batch_markdown(summary, len(rows))
     atomic_write_json(out / "batch.json", {"executor": executor, "rows": rows, "summary": summary})
-    atomic_write_text(out / "batch.md", batch_markdown(summary, len(rows)))
+    atomic_write_text(out / "batch.md", markdown)
     plot_batch(rows, out / "batch.png")
     return rows, summary

@@ -61,11 +61,13 @@ MISSION_KEYS = {
     "render_samples",
     "perception_process",
     "water_backend",
+    "planner",
 }
 # the [mission] keys that are not plain numbers, and what they must be
 SETTING_TYPES: dict[str, type] = {
     "pose_source": str,
     "water_backend": str,
+    "planner": str,
     "render_samples": int,
     "perception_process": bool,
     "relocalise": bool,
@@ -127,9 +129,11 @@ def prepare_mission(
     duration_s: float | None = None,
     pose_source: str | None = None,
     seed: int = 0,
+    planner: str | None = None,
 ) -> tuple[Scenario, MissionParams]:
     """The scenario and the MissionParams of a mission file, with the command line's overrides: the first
-    ``robots`` robots, the duration and the front end's pose source (``maptidal run`` and ``batch``)."""
+    ``robots`` robots, the duration, the front end's pose source and the planner (``maptidal run`` and
+    ``batch``)."""
     scenario, settings = load_mission(path)
     if robots is not None:
         if not 1 <= robots <= len(scenario.robots):
@@ -139,6 +143,8 @@ def prepare_mission(
         settings["duration_s"] = duration_s
     if pose_source is not None:
         settings["pose_source"] = pose_source
+    if planner is not None:
+        settings["planner"] = planner
     params = MissionParams(seed=seed, **settings)
     check_events(params.events, [r.name for r in scenario.robots])
     return scenario, params

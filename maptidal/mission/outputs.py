@@ -486,7 +486,9 @@ def summary_table(document: dict) -> str:
     rows = [
         ("simulated time", f"{m['completion_time_s']:.1f} s"),
         ("real-time factor", f"{rtf:.1f}x" if rtf else "n/a"),
+        *([("planner", document["planner"])] if document.get("planner") else []),
         ("finished", str(m["finished"])),
+        *([("ended", document["ending"])] if document.get("ending") else []),
         ("tasks found / done / verified", f"{m['tasks_found']} / {m['tasks_done']} / {m['tasks_verified']}"),
         ("tasks inspected twice", str(document.get("duplicate_inspections", "n/a"))),
         # a snapshot of the auction, not a fault: on a slow channel two bundles may hold a task for a while
@@ -562,6 +564,11 @@ def rebuild(root, tank) -> dict:
         "rebuilt_from_events": True,
         "duplicate_inspections": sum(n - 1 for n in inspections.values()),
         "finished": any(e["kind"] == "end" and e.get("finished") for e in events),
+        # how it ended, from its end event; a killed mission has none, and its snapshot's is stale
+        "ending": next(
+            (e.get("ending") for e in events if e["kind"] == "end"),
+            "killed before its end: rebuilt from the event log",
+        ),
         "sim_time_s": max((e["t"] for e in events), default=0.0),
         "robots": snapshot.get("robots", robots),
         "tasks": sorted(tasks.values(), key=lambda t: t["id"]),

@@ -48,6 +48,8 @@ from maptidal.allocation.agent import AgentParams
 from maptidal.allocation.auction import AuctionEvent, AuctionSimulation
 from maptidal.allocation.messages import DONE
 from maptidal.allocation.scoring import AuctionParams, RobotProfile
+from maptidal.allocation.tasks import Task, task_key
+from maptidal.baselines import boustrophedon_viewpoints, voronoi_viewpoints
 from maptidal.camera import StereoCameraParams
 from maptidal.comms.channel import ChannelParams, Outage
 from maptidal.controllers.estimation import rotation_from_rpy
@@ -113,6 +115,12 @@ class MissionEvent:
 
 
 MAX_DURATION_S = 86400.0  # a day of simulated time: longer than any battery a BlueROV2 carries
+# where a mission's tasks come from (MissionParams.planner), and the baselines' viewpoints
+PLANNERS = ("maptidal", "voronoi", "boustrophedon")
+PLANNER_VIEWPOINTS = {"voronoi": voronoi_viewpoints, "boustrophedon": boustrophedon_viewpoints}
+# the origin byte of a mission plan's task keys (maptidal.allocation.tasks.task_key): robots mint theirs
+# from their own index, at most 255 robots below it
+PLAN_ORIGIN = 255
 
 
 @dataclass(frozen=True)
@@ -195,6 +203,10 @@ class MissionParams:
     video_size: tuple[int, int] = (640, 400)
     video_frames_per_sim_s: float = 2.0
     video_playback_fps: float = 20.0
+    # where the tasks come from (PLANNERS): "maptidal", discovered from the robots' own meshes as they
+    # fly; "voronoi" or "boustrophedon", the paper's baselines, whose viewpoints are given a priori from
+    # the tank model, as the baselines require, and known to every robot from the start (a mission plan)
+    planner: str = "maptidal"
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.duration_s) and 0 < self.duration_s <= MAX_DURATION_S):
@@ -209,6 +221,8 @@ class MissionParams:
             )
         if self.pose_source not in POSE_SOURCES:
             raise ValueError(f"pose source must be one of {POSE_SOURCES}, got {self.pose_source!r}")
+        if self.planner not in PLANNERS:
+            raise ValueError(f"planner must be one of {PLANNERS}, got {self.planner!r}")
         if not (
             self.frame_rate_hz > 0
             and self.frame_rate_no_dvl_hz > 0
@@ -478,6 +492,30 @@ class Mission:
         self.video = MissionVideo(self, params) if params.video else None
         # what the captured views have inspected so far (occlusion on), for the progress bar and snapshots
         self.seen = SeenVoxels(CoverageModel.from_tank(self.scenario.tank, CoverageParams(occlusion=True)))
+        self._planned = self._plan_tasks() if params.planner != "maptidal" else []
+
+    def _plan_tasks(self) -> list[Task]:
+        """A baseline's viewpoints from the tank model, as tasks every robot knows from the start. Those
+        the tank's free space cannot hold are left out, and said so, as discovery leaves out its own."""
+        tank = self.scenario.tank
+        try:
+            rows = PLANNER_VIEWPOINTS[self.params.planner](tank)
+        except ValueError as error:
+            raise ValueError(f"the {self.params.planner} baseline cannot plan this tank: {error}") from None
+        reachable = self._reachable(rows)
+        tasks = [
+            Task.create(task_key(PLAN_ORIGIN, k), row[:3], row[3:])
+            for k, row in enumerate(rows)
+            if reachable[k]
+        ]
+        self.plan_summary = {"viewpoints": len(rows), "unreachable": int((~reachable).sum())}
+        if not tasks:
+            raise ValueError(
+                f"the {self.params.planner} baseline has no viewpoint the robots can reach in this tank: all "
+                f"{len(rows)} lie within {REACH_MARGIN_M:g} m of a wall, the floor or the surface, or behind "
+                "a wall"
+            )
+        return tasks
 
     # ----- helpers ------------------------------------------------------------------------------
     def _limits(self) -> MotionLimits:
@@ -666,6 +704,8 @@ class Mission:
             waiting=waiting,
             perception={"mode": self.perception.mode, "pid": self.perception.pid},
         )
+        if self._planned:
+            self._add_plan(0.0)
         now = 0.0
         finished = False
         while now < p.duration_s - 1e-9:
@@ -727,7 +767,7 @@ class Mission:
                 if self._finished():
                     finished = True
                     break
-        self.writer.event(now, "end", finished=finished)
+        self.writer.event(now, "end", finished=finished, ending=self.ending(now, finished))
         return self._write_final(now, wall_start, finished)
 
     def _write_snapshot(self, now: float, wall_s: float) -> None:
@@ -765,6 +805,8 @@ class Mission:
             robot.activity, robot.next_frame_s = "explore", now
             self._start_exploring(robot, now)
             self.auction.apply_events_due(now)  # its CBBA agent joins: the auction's own join event
+            if self._planned:  # it dives with the mission plan, as its teammates did
+                self.auction.agents[robot.index].add_tasks(self._planned, now_s=now)
             self.writer.event(now, "join", robot=robot.name)
         elif event.kind == "outage":
             # the channel carries it (ChannelParams.outages, set up at construction); logged for the record
@@ -830,6 +872,30 @@ class Mission:
         )
         self._frames[robot.name] = self._gl.submit(self._draw_frame, snapshot, job)
 
+    def _add_plan(self, now: float) -> None:
+        """Give every robot the planner's tasks, as a mission plan each was loaded with, and log them."""
+        everyone = tuple(self.auction.agents)  # the robots that start the mission
+        for agent in self.auction.agents.values():
+            agent.add_tasks(self._planned, known_to=everyone, now_s=now)
+        for task in self._planned:
+            self._ledger(task, "plan", now)
+        planner, summary = self.params.planner, self.plan_summary
+        self.writer.event(now, "planned", planner=planner, tasks=len(self._planned), **summary)
+
+    def _ledger(self, task: Task, found_by: str, now: float) -> None:
+        """Enter a task in the mission's own ledger (``mission.json``'s tasks)."""
+        self.tasks[task.key] = {
+            "id": task.key,
+            "position": task.position.tolist(),
+            "direction": task.direction.tolist(),
+            "found_by": found_by,
+            "found_at_s": round(now, 3),
+            "assigned_to": None,
+            "completed": False,
+            "completion_time": None,
+            "image": None,
+        }
+
     def _use_frame_result(self, robot: _Robot, result: FrameResult, now: float) -> None:
         """A frame's answer, one frame period after it was taken: the visual fix to fly on, and the new
         tasks the robot can reach, minted into its CBBA agent."""
@@ -840,8 +906,8 @@ class Mission:
             robot.xy_correction = result.xy_correction
             robot.position_sigma_m = result.position_sigma_m
         robot.visual_updates = result.visual_updates
-        if result.faces == 0:
-            return
+        if result.faces == 0 or self.params.planner != "maptidal":
+            return  # a baseline's tasks are planned, not discovered: the frames serve localisation only
         start = time.perf_counter()
         agent = self.auction.agents[robot.index]
         new = result.new_tasks
@@ -850,17 +916,7 @@ class Mission:
             if not ok:
                 continue
             task = agent.discover_task(row[:3], row[3:], now_s=now)
-            self.tasks[task.key] = {
-                "id": task.key,
-                "position": task.position.tolist(),
-                "direction": task.direction.tolist(),
-                "found_by": robot.name,
-                "found_at_s": round(now, 3),
-                "assigned_to": None,
-                "completed": False,
-                "completion_time": None,
-                "image": None,
-            }
+            self._ledger(task, robot.name, now)
             self.writer.event(
                 now,
                 "discovered",
@@ -999,12 +1055,36 @@ class Mission:
         alive = [r for r in self.robots.values() if r.active]
         if not alive or not all(r.explored for r in alive):
             return False
+        open_tasks, known = self._open_tasks(alive)
+        return known > 0 and open_tasks == 0
+
+    def _open_tasks(self, alive: list[_Robot]) -> tuple[int, int]:
+        """How many of the tasks the live robots know are neither done nor given up, and how many they
+        know. A task is out of the team's reach when every live robot has tried it and given up."""
         views = [self.auction.agents[r.index] for r in alive]
         known = np.unique(np.concatenate([a.keys for a in views]))
         done = np.concatenate([a.keys[a.z == DONE] for a in views])
-        # a task is out of the team's reach when every live robot has tried it and given up
         skipped = np.array(sorted(set.intersection(*(r.skipped for r in alive))), np.int64)
-        return len(known) > 0 and bool(np.isin(known, np.r_[done, skipped]).all())
+        return int((~np.isin(known, np.r_[done, skipped])).sum()), len(known)
+
+    def ending(self, now: float, finished: bool) -> str:
+        """How the mission ended, in one sentence: when it finished its work, or what was left at the
+        ``duration_s`` cap (tasks neither done nor given up, robots still exploring or waiting, none
+        alive)."""
+        if finished:
+            return f"finished at {now:.1f} s: every robot explored and every known task was done or given up"
+        alive = [r for r in self.robots.values() if r.active]
+        if not alive:
+            return f"stopped at {now:.1f} s: no robot was alive"
+        open_tasks, known = self._open_tasks(alive)
+        reasons = [f"{open_tasks} of {known} known tasks neither done nor given up"]
+        exploring = [r.name for r in alive if not r.explored]
+        if exploring:
+            reasons.append(f"{', '.join(exploring)} still exploring")
+        waiting = [r.name for r in self.robots.values() if r.activity == "waiting"]
+        if waiting:
+            reasons.append(f"{', '.join(waiting)} not yet launched")
+        return f"not finished at the {now:.1f} s cap: " + "; ".join(reasons)
 
     def inspected_pct(self) -> float:
         """The share of the walls' voxels the captured views have seen so far, occlusion on (%)."""
@@ -1036,7 +1116,11 @@ class Mission:
         stats = self.auction.channel.stats
         conflicts = self.auction.report(converged=False).conflicts  # tasks in two live bundles now
         return {
+            "planner": self.params.planner,
+            # a baseline's plan: its viewpoints, and those out of the robots' reach, left out at the start
+            **({"plan": self.plan_summary} if self._planned else {}),
             "finished": finished,
+            "ending": self.ending(now, finished),
             "realtime_factor": now / wall_s if wall_s > 0 else None,
             "sim_time_s": now,
             "wall_time_s": wall_s,

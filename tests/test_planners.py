@@ -1,0 +1,88 @@
+"""The paper's baselines flown in the closed loop (issue [loop], part 3): ``--planner voronoi`` and
+``boustrophedon`` give every robot the baseline's viewpoints from the tank model at the start, as a
+mission plan, and the same robots, controllers, channel and CBBA fly them; discovery stays out. The
+viewpoints are checked against the baselines' own functions and a hand-written reach band, not against
+the mission's filter."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from maptidal.baselines import boustrophedon_viewpoints, voronoi_viewpoints
+from maptidal.cli import main
+from maptidal.mission.config import load_mission
+from maptidal.mission.outputs import read_events
+from maptidal.mission.run import Mission, MissionParams
+from maptidal.tank import TankModel
+
+# a robot keeps 0.35 m from the floor and the surface (the mission's reach margin), and the OSB tank
+# is 2.0 m deep: a viewpoint outside this band of heights is out of reach
+REACH_BAND_M = (0.35, 2.0 - 0.35)
+
+
+@pytest.fixture(scope="module")
+def voronoi_mission(tmp_path_factory):
+    scenario, _ = load_mission(None)
+    out = tmp_path_factory.mktemp("voronoi")
+    document = Mission(scenario, MissionParams(duration_s=30.0, seed=2, planner="voronoi"), out).run()
+    return scenario, document, out
+
+
+def test_every_robot_starts_with_the_baselines_reachable_viewpoints(voronoi_mission):
+    scenario, document, out = voronoi_mission
+    rows = voronoi_viewpoints(scenario.tank)
+    low, high = REACH_BAND_M
+    reachable = rows[(rows[:, 2] >= low) & (rows[:, 2] <= high)]
+    tasks = document["tasks"]
+    assert document["planner"] == "voronoi"
+    assert document["plan"] == {"viewpoints": len(rows), "unreachable": len(rows) - len(reachable)}
+    assert len(tasks) == len(reachable) > 0
+    for task in tasks:
+        assert task["found_by"] == "plan" and task["found_at_s"] == 0.0
+        # the task is one of the baseline's viewpoints (positions travel as centimetres)
+        distance = np.linalg.norm(reachable[:, :3] - np.asarray(task["position"]), axis=1)
+        nearest = int(np.argmin(distance))
+        assert distance[nearest] < 0.01
+        np.testing.assert_allclose(task["direction"], reachable[nearest, 3:], atol=0.01)
+    events = read_events(out)
+    planned = [e for e in events if e["kind"] == "planned"]
+    assert len(planned) == 1 and planned[0]["t"] == 0.0 and planned[0]["tasks"] == len(reachable)
+
+
+def test_a_baseline_mission_discovers_nothing_and_flies_its_plan(voronoi_mission):
+    _, document, out = voronoi_mission
+    assert {t["found_by"] for t in document["tasks"]} == {"plan"}
+    kinds = [e["kind"] for e in read_events(out)]
+    assert "discovered" not in kinds and "keyframe" not in kinds  # the frames serve localisation only
+    assert "flying" in kinds  # the auction gave the plan out and the robots set off
+    assert "| planner | voronoi |" in (out / "report.md").read_text()
+
+
+def test_the_boustrophedon_plan_is_the_baselines_lanes_within_reach(tmp_path):
+    scenario, _ = load_mission(None)
+    mission = Mission(scenario, MissionParams(duration_s=5.0, planner="boustrophedon"), tmp_path)
+    rows = boustrophedon_viewpoints(scenario.tank)
+    low, high = REACH_BAND_M
+    assert len(mission._planned) == int(((rows[:, 2] >= low) & (rows[:, 2] <= high)).sum()) > 0
+    keys = [t.key for t in mission._planned]
+    assert len(set(keys)) == len(keys) and all(k >> 16 == 255 for k in keys)  # the plan's own key space
+
+
+def test_a_tank_with_no_reachable_viewpoint_is_refused_in_one_line(tmp_path):
+    scenario, _ = load_mission(None)
+    config = scenario.tank.config
+    window = dataclasses.replace(config.window, width=0.0)  # no window in a 0.6 m wall
+    shallow = TankModel(dataclasses.replace(config, water_depth=0.6, window=window))
+    robots = tuple(dataclasses.replace(r, position=(*r.position[:2], 0.3)) for r in scenario.robots)
+    scenario = dataclasses.replace(scenario, tank=shallow, robots=robots)
+    with pytest.raises(ValueError, match="boustrophedon baseline has no viewpoint the robots can reach"):
+        Mission(scenario, MissionParams(duration_s=5.0, planner="boustrophedon"), tmp_path)
+
+
+def test_an_unknown_planner_is_refused():
+    with pytest.raises(ValueError, match="planner must be one of"):
+        MissionParams(planner="greedy")
+    assert main(["run", "--planner", "greedy"]) == 2
