@@ -182,13 +182,19 @@ class DiscoveryResult:
 
     def to_json_dict(self) -> dict:
         """The ``maptidal discover --json`` document: counts, tasks and params."""
-        from maptidal.files import tasks_to_json_list
-
         return {
             "counts": self.counts,
             "tasks": tasks_to_json_list(self.final),
             "params": self.params.to_dict(),
         }
+
+
+def tasks_to_json_list(rows: np.ndarray) -> list[dict[str, list[float]]]:
+    """Viewpoint rows ``(N, 6)`` as ``[{"position": [...], "direction": [...]}, ...]``."""
+    return [
+        {"position": [float(v) for v in row[:3]], "direction": [float(v) for v in row[3:6]]}
+        for row in np.asarray(rows, dtype=float).reshape(-1, 6)
+    ]
 
 
 def _as_float_array(values: object, name: str) -> np.ndarray:

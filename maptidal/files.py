@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from maptidal.discovery import DiscoveryInputError, validate_mesh, validate_viewpoints
+from maptidal.discovery import DiscoveryInputError, tasks_to_json_list, validate_mesh, validate_viewpoints
 
 MESH_SUFFIXES = (".ply", ".obj", ".stl")
 
@@ -77,14 +77,6 @@ def save_png(figure, path: str | os.PathLike, dpi: int = 110) -> Path:
 def atomic_write_json(path: str | os.PathLike, document: object) -> Path:
     """Write ``document`` as indented JSON to ``path`` atomically."""
     return atomic_write_text(path, json.dumps(document, indent=2) + "\n")
-
-
-def tasks_to_json_list(rows: np.ndarray) -> list[dict[str, list[float]]]:
-    """Viewpoint rows ``(N, 6)`` as ``[{"position": [...], "direction": [...]}, ...]``."""
-    return [
-        {"position": [float(v) for v in row[:3]], "direction": [float(v) for v in row[3:6]]}
-        for row in np.asarray(rows, dtype=float).reshape(-1, 6)
-    ]
 
 
 def tasks_from_json_document(document: object, source: str = "tasks") -> np.ndarray:

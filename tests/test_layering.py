@@ -132,3 +132,61 @@ def test_the_algorithm_modules_need_only_numpy_scipy_trimesh_and_opencv():
             and name.split(".")[0] not in ("maptidal", "")
         }
         assert third_party <= ALGORITHM_THIRD_PARTY, f"{path.relative_to(ROOT)} needs {sorted(third_party)}"
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module to the modules of ours it imports, lazy and TYPE_CHECKING imports included (a package's
+    ``__init__`` is left out: importing a submodule runs it, which is no dependency of the submodule)."""
+    files = [path for top in INSTALLED_AS for path in sources(top) if path.name != "__init__.py"]
+    names = {module_name(path) for path in files}
+    graph = {}
+    for path in files:
+        name = module_name(path)
+        graph[name] = {m for m in imports_of(path) if m in names} - {name}
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Every strongly connected group of more than one module (Tarjan's algorithm)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    groups: list[list[str]] = []
+
+    def visit(node: str) -> None:
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for other in sorted(graph.get(node, ())):
+            if other not in index:
+                visit(other)
+                low[node] = min(low[node], low[other])
+            elif other in on_stack:
+                low[node] = min(low[node], index[other])
+        if low[node] == index[node]:
+            group = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                group.append(member)
+                if member == node:
+                    break
+            if len(group) > 1:
+                groups.append(sorted(group))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return groups
+
+
+def test_the_cycle_finder_finds_a_cycle_built_by_hand():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_two_modules_import_each_other_even_lazily():
+    """A circle of imports (discovery and files, the mission loop and its video once) means two modules
+    that cannot be understood, tested or moved apart; a lazy import only hides it."""
+    assert _cycles(_import_graph()) == []

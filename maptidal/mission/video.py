@@ -3,14 +3,32 @@ view inset with its name, and the time, the tasks and the share inspected writte
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import numpy as np
 
 from maptidal.envs.views import overview_camera, third_person_frame
 
-if TYPE_CHECKING:  # run imports this module
-    from maptidal.mission.run import Mission, MissionParams
+
+class VideoSettings(Protocol):
+    """What the video takes of a mission's settings (``maptidal.mission.run.MissionParams`` has it)."""
+
+    video_size: tuple[int, int]
+    video_frames_per_sim_s: float
+    video_playback_fps: float
+
+
+class FilmedMission(Protocol):
+    """What the video reads of a running mission (``maptidal.mission.run.Mission`` has it): named here
+    rather than imported, so that this module does not depend on the loop that uses it."""
+
+    sim: Any
+    writer: Any
+    robots: dict
+    intrinsics: Any
+    tasks: dict
+
+    def inspected_pct(self) -> float: ...
 
 
 class MissionVideo:
@@ -18,7 +36,7 @@ class MissionVideo:
     latest left image inset and the time and task counts written on; written to ``mission.part.mp4``
     and renamed when the mission ends, so a killed mission leaves no file that looks whole."""
 
-    def __init__(self, mission: Mission, params: MissionParams) -> None:
+    def __init__(self, mission: FilmedMission, params: VideoSettings) -> None:
         import cv2
         import mujoco
 
