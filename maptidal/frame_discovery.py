@@ -1,9 +1,9 @@
 """Map-TIDAL task discovery on a stereo recording: the front end's keyframe meshes
 (:mod:`maptidal.perception.frontend`) through discovery frame by frame
-(:func:`maptidal.evaluation.discover_over_keyframes`), with the figures that say how good the map was: the
-mesh error against the true surface (when the recording carries one), how it falls with the number of
-observations a landmark fused, and the absolute trajectory error of the pose source (when the recording
-has ground truth). No simulator: a real recording of the same shape runs the same way.
+(:func:`maptidal.evaluation.comparison.discover_over_keyframes`), with the figures that say how good the map
+was: the mesh error against the true surface (when the recording carries one), how it falls with the number of
+observations a landmark fused, and the absolute trajectory error of the pose source (when the recording has
+ground truth). No simulator: a real recording of the same shape runs the same way.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 import trimesh
 
 from maptidal.discovery import DiscoveryParams
-from maptidal.evaluation import discover_over_keyframes
+from maptidal.evaluation.comparison import discover_over_keyframes
 from maptidal.files import atomic_write_bytes, atomic_write_json, load_mesh, save_mesh, tasks_to_json_list
 from maptidal.perception.frontend import (
     FrontEndParams,

@@ -5,7 +5,7 @@ import pytest
 from geometry_oracles import distances_to_triangles
 from scipy.spatial import cKDTree
 
-from maptidal.baselines import (
+from maptidal.evaluation.baselines import (
     BoustrophedonParams,
     VoronoiParams,
     boustrophedon_viewpoints,
@@ -119,7 +119,7 @@ def test_the_seed_generator_spreads_seeds_on_a_jittered_grid():
     """The generator reading of the paper's Voronoi tool: a regular grid at regularity 1 without Lloyd
     steps (cell centres), every seed inside the wall-avoidance margin, and Lloyd steps lowering the
     quantisation energy from the jittered start."""
-    from maptidal.baselines import (
+    from maptidal.evaluation.baselines import (
         VoronoiParams,
         jittered_grid_seeds,
         quantisation_energy,
@@ -150,7 +150,7 @@ def test_the_seed_generator_spreads_seeds_on_a_jittered_grid():
 def test_a_fully_jittered_seed_stays_in_its_own_cell():
     """At regularity 0 each seed lies anywhere in its grid cell, never in a neighbour's: one seed per
     cell of the 8 x 3 lattice, and together they spread over more than a regular grid's offsets."""
-    from maptidal.baselines import VoronoiParams, jittered_grid_seeds
+    from maptidal.evaluation.baselines import VoronoiParams, jittered_grid_seeds
 
     for seed in range(5):
         params = VoronoiParams(layout="generator", regularity=0.0, lloyd_steps=0, seed=seed)

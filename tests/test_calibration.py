@@ -1,6 +1,6 @@
-"""The tank calibration (issue [fidelity], maptidal/calibration.py): it recovers known dimensions from
-figures our own baselines give on a tank of known size; the tank TOML writer round-trips; bad requests
-are refused."""
+"""The tank calibration (issue [fidelity], maptidal/evaluation/calibration.py): it recovers known
+dimensions from figures our own baselines give on a tank of known size; the tank TOML writer
+round-trips; bad requests are refused."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import tomllib
 
 import pytest
 
-from maptidal.baselines import VoronoiParams
-from maptidal.calibration import (
+from maptidal.evaluation.baselines import VoronoiParams
+from maptidal.evaluation.calibration import (
     PAPER_BASELINES,
     Calibration,
     CalibrationParams,

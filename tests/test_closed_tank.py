@@ -18,7 +18,7 @@ from maptidal.envs.scenario import RobotSpec, Scenario, inside_tank
 from maptidal.envs.simulation import Simulation
 from maptidal.envs.vehicle import load_vehicle
 from maptidal.envs.world import build_tank_spec
-from maptidal.free_space import classify_tasks
+from maptidal.evaluation.free_space import classify_tasks
 from maptidal.tank import ROOM_DEPTH_M, TankModel
 
 

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import gamma
 
-from maptidal.coverage import (
+from maptidal.evaluation.coverage import (
     CoverageModel,
     CoverageParams,
     coverage_report,

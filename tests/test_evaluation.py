@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 
 from maptidal.cli import main
-from maptidal.coverage import CoverageParams
 from maptidal.discovery import DiscoveryParams, discover
-from maptidal.evaluation import (
+from maptidal.evaluation.comparison import (
     EvaluationConfig,
     discover_over_keyframes,
     expected_ordering,
@@ -17,6 +16,7 @@ from maptidal.evaluation import (
     run_sweep,
     surface_aligned_count,
 )
+from maptidal.evaluation.coverage import CoverageParams
 from maptidal.files import load_tasks, save_tasks
 from maptidal.keyframes import ExplorationParams, exploration_keyframes
 from maptidal.tank import TankModel

@@ -1,12 +1,12 @@
-"""The optional free-space check (maptidal/free_space.py) and its use by compare."""
+"""The optional free-space check (maptidal/evaluation/free_space.py) and its use by compare."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from maptidal.baselines import voronoi_viewpoints
-from maptidal.evaluation import EvaluationConfig, run_compare
-from maptidal.free_space import classify_tasks, free_space_counts, free_space_mask
+from maptidal.evaluation.baselines import voronoi_viewpoints
+from maptidal.evaluation.comparison import EvaluationConfig, run_compare
+from maptidal.evaluation.free_space import classify_tasks, free_space_counts, free_space_mask
 from maptidal.tank import TankModel
 
 TANK = TankModel()

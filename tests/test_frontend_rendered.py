@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 from cli_helpers import run_maptidal
 
-from maptidal.coverage import CoverageModel
 from maptidal.envs.scenario import load_scenario
 from maptidal.envs.water import WaterParams
-from maptidal.evaluation import EvaluationConfig, config_keyframes, discover_over_keyframes
+from maptidal.evaluation.comparison import EvaluationConfig, config_keyframes, discover_over_keyframes
+from maptidal.evaluation.coverage import CoverageModel
 from maptidal.frame_discovery import discover_on_recording
 from maptidal.keyframes import RefinementParams, tank_edges
 from maptidal.mission.capture import CaptureParams, capture

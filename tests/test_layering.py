@@ -18,7 +18,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 INSTALLED_AS = {"maptidal": "maptidal", "envs": "maptidal.envs", "controllers": "maptidal.controllers"}
-ALGORITHMS = ("discovery", "perception", "allocation", "comms", "coverage", "geometry")
+ALGORITHMS = ("discovery", "perception", "allocation", "comms", "evaluation.coverage", "geometry")
 ALGORITHM_THIRD_PARTY = {"numpy", "scipy", "trimesh", "cv2"}
 
 

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from maptidal.cli import main
-from maptidal.paper_table import (
+from maptidal.evaluation.paper_table import (
     PAPER_GRID,
     colour_class,
     paper_cells,
@@ -89,7 +89,7 @@ def test_sweep_paper_grid_prints_ours_beside_the_papers(tmp_path, capsys):
 
 
 def test_the_papers_capture_protocol_is_seven_keyframes_rising_half_a_metre():
-    from maptidal.evaluation import EvaluationConfig, config_keyframes
+    from maptidal.evaluation.comparison import EvaluationConfig, config_keyframes
     from maptidal.keyframes import PaperCaptureParams, paper_capture_poses
     from maptidal.tank import TankModel
 

@@ -5,7 +5,7 @@ import pytest
 from geometry_oracles import distances_to_triangles
 from scipy.spatial import Delaunay
 
-from maptidal.coverage import voxel_centres
+from maptidal.evaluation.coverage import voxel_centres
 from maptidal.geometry import CameraModel, in_frustum
 from maptidal.keyframes import (
     ExplorationParams,

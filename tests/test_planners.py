@@ -11,8 +11,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from maptidal.baselines import boustrophedon_viewpoints, voronoi_viewpoints
 from maptidal.cli import main
+from maptidal.evaluation.baselines import boustrophedon_viewpoints, voronoi_viewpoints
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import read_events
 from maptidal.mission.run import Mission, MissionParams

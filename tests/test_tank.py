@@ -129,7 +129,7 @@ def test_config_dataclass_validates_directly():
 def test_the_baselines_geometry_may_cut_the_side_walls():
     """side_walls.baseline_length: the baselines lay their points on a shorter strip than the evaluated
     one (the paper's Fig. 6A), and a part longer than the evaluated one is refused."""
-    from maptidal.baselines import boustrophedon_viewpoints
+    from maptidal.evaluation.baselines import boustrophedon_viewpoints
     from maptidal.tank import TankConfigError, TankModel, tank_config_from_dict
 
     document = {"water_depth": 2.0, "end_wall": {"width": 2.4}, "side_walls": {"evaluated_length": 0.5}}

@@ -8,8 +8,8 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from maptidal.coverage import CoverageModel, CoverageParams, SeenVoxels
 from maptidal.envs.gym.core import SAFE_BOX, MapTidalEnv
+from maptidal.evaluation.coverage import CoverageModel, CoverageParams, SeenVoxels
 
 SECTORS = 8  # coverage summary: the evaluated walls in eight sectors around the tank's centre line
 REWARD_PER_VOXEL = 0.01
@@ -27,8 +27,8 @@ def camera_viewpoint(truth: dict, camera_position) -> np.ndarray:
 
 
 class WallCoverage:
-    """The tank's evaluated walls as voxels (:class:`maptidal.coverage.CoverageModel`, with occlusion),
-    which of them cameras have seen so far, and a summary: the share seen, overall and in
+    """The tank's evaluated walls as voxels (:class:`maptidal.evaluation.coverage.CoverageModel`, with
+    occlusion), which of them cameras have seen so far, and a summary: the share seen, overall and in
     :data:`SECTORS` sectors by bearing from (-1.5, 0), a point on the tank's centre line."""
 
     def __init__(self, tank, voxel_m: float = 0.05) -> None:
@@ -91,8 +91,8 @@ class TankInspectionEnv(MapTidalEnv):
 
     ## Rewards
 
-    Per step: ``0.01 x`` the wall voxels newly seen by the robot's camera (the OAK-D frustum, 2 m range,
-    with occlusion, counted by :class:`maptidal.coverage.CoverageModel` on 5 cm voxels, from the true
+    Per step: ``0.01 x`` the wall voxels newly seen by the robot's camera (the OAK-D frustum, 2 m range, with
+    occlusion, counted by :class:`maptidal.evaluation.coverage.CoverageModel` on 5 cm voxels, from the true
     camera pose), ``- 0.05 x`` the mean squared thruster command, ``- 10 x`` the seconds of the step in
     contact with the tank. Looking again at seen voxels earns nothing.
 

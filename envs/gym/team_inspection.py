@@ -13,7 +13,6 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from maptidal.baselines import voronoi_viewpoints
 from maptidal.controllers.pose import PoseController
 from maptidal.controllers.task import TaskExecutor, TaskParams
 from maptidal.envs.gym.core import (
@@ -28,6 +27,7 @@ from maptidal.envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCov
 from maptidal.envs.randomization import apply as apply_randomization
 from maptidal.envs.scenario import Scenario, load_scenario, with_frame
 from maptidal.envs.views import third_person_frame
+from maptidal.evaluation.baselines import voronoi_viewpoints
 
 MAX_ROBOTS = 4
 MIN_SEPARATION_M = 0.9  # start poses at least this far apart (a Heavy is 0.58 m wide)
@@ -371,7 +371,7 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
 
 def task_poses(tank, camera_position) -> np.ndarray:
     """The inspection tasks of the ``action="tasks"`` mode, ``(N, 4)`` robot poses x, y, z, yaw: the
-    Voronoi baseline's viewpoints (``maptidal.baselines``, 1 m from the walls), each with the robot
+    Voronoi baseline's viewpoints (``maptidal.evaluation.baselines``, 1 m from the walls), each with the robot
     placed so that its camera sits at the viewpoint looking along it."""
     viewpoints = voronoi_viewpoints(tank)
     poses = []

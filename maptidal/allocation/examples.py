@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from maptidal.baselines import VoronoiParams, boustrophedon_viewpoints, voronoi_viewpoints
+from maptidal.evaluation.baselines import VoronoiParams, boustrophedon_viewpoints, voronoi_viewpoints
 from maptidal.files import atomic_write_text
 from maptidal.paths import asset
 from maptidal.tank import TankModel, load_tank_config

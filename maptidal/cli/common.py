@@ -203,7 +203,7 @@ def discovery_params_from(args: argparse.Namespace) -> DiscoveryParams:
 
 def add_coverage_args(parser: argparse.ArgumentParser) -> None:
     """The coverage model's options: tank, voxel size, far plane and occlusion."""
-    from maptidal.coverage import CoverageParams
+    from maptidal.evaluation.coverage import CoverageParams
 
     defaults = CoverageParams()
     group = parser.add_argument_group("coverage model")
@@ -234,8 +234,9 @@ def add_coverage_args(parser: argparse.ArgumentParser) -> None:
 
 
 def coverage_params_from(args: argparse.Namespace, discovery: DiscoveryParams | None = None):
-    """The :class:`maptidal.coverage.CoverageParams` of the parsed options, with discovery's camera."""
-    from maptidal.coverage import CoverageParams
+    """The :class:`maptidal.evaluation.coverage.CoverageParams` of the parsed options, with discovery's
+    camera."""
+    from maptidal.evaluation.coverage import CoverageParams
 
     camera = discovery or DiscoveryParams()
     return CoverageParams(

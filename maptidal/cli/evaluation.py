@@ -174,7 +174,7 @@ def register(commands) -> None:
 
 def run_coverage(args: argparse.Namespace) -> int:
     """Handler of ``maptidal coverage``."""
-    from maptidal.coverage import CoverageModel
+    from maptidal.evaluation.coverage import CoverageModel
     from maptidal.files import atomic_write_json, load_tasks
     from maptidal.tank import TankModel, load_tank_config
 
@@ -185,7 +185,7 @@ def run_coverage(args: argparse.Namespace) -> int:
     report, views = model.evaluate(tasks)
     document = {"tank": tank.config.name, **report.to_dict()}
     if args.plot_dir:
-        from maptidal.coverage_plots import plot_histograms, plot_voxel_views
+        from maptidal.evaluation.plots import plot_histograms, plot_voxel_views
 
         out = Path(args.plot_dir)
         name = Path(args.tasks).name
@@ -205,8 +205,8 @@ def run_coverage(args: argparse.Namespace) -> int:
 
 def run_noise_curve(args: argparse.Namespace) -> int:
     """Handler of ``maptidal noise-curve``."""
-    from maptidal.coverage_plots import plot_noise_curve
-    from maptidal.evaluation import landmark_noise_curve
+    from maptidal.evaluation.comparison import landmark_noise_curve
+    from maptidal.evaluation.plots import plot_noise_curve
     from maptidal.files import atomic_write_json
 
     levels = tuple(float(v) for v in args.levels.split(","))
@@ -235,7 +235,7 @@ def run_noise_curve(args: argparse.Namespace) -> int:
 
 
 def _evaluation_config(args: argparse.Namespace):
-    from maptidal.evaluation import EvaluationConfig
+    from maptidal.evaluation.comparison import EvaluationConfig
     from maptidal.keyframes import RefinementParams
     from maptidal.perception.mesher import MesherParams
 
@@ -254,7 +254,7 @@ def _evaluation_config(args: argparse.Namespace):
 
 def run_compare(args: argparse.Namespace) -> int:
     """Handler of ``maptidal compare``."""
-    from maptidal.evaluation import comparison_table, run_compare
+    from maptidal.evaluation.comparison import comparison_table, run_compare
 
     out = None if args.no_write else args.out
     rendered = _rendered_keyframes(args, out) if args.keyframes == "rendered" else None
@@ -293,9 +293,15 @@ def _rendered_keyframes(args: argparse.Namespace, out: Path | None):
 
 def run_sweep(args: argparse.Namespace) -> int:
     """Handler of ``maptidal sweep``."""
-    from maptidal.evaluation import grid_size, parse_grid, run_sweep, sweep_markdown
+    from maptidal.evaluation.comparison import grid_size, parse_grid, run_sweep, sweep_markdown
+    from maptidal.evaluation.paper_table import (
+        PAPER_GRID,
+        rank_correlations,
+        side_by_side,
+        table_markdown,
+        trends,
+    )
     from maptidal.files import atomic_write_json, atomic_write_text
-    from maptidal.paper_table import PAPER_GRID, rank_correlations, side_by_side, table_markdown, trends
 
     if args.paper_grid and args.grid:
         raise ValueError("--paper-grid is the paper's grid: give it or --grid, not both")
@@ -341,7 +347,7 @@ def run_sweep(args: argparse.Namespace) -> int:
 
 def run_calibrate_tank(args: argparse.Namespace) -> int:
     """Handler of ``maptidal calibrate-tank``."""
-    from maptidal.calibration import (
+    from maptidal.evaluation.calibration import (
         DIMENSIONS,
         Calibration,
         CalibrationParams,

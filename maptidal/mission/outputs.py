@@ -111,7 +111,7 @@ def coverage_of(views: np.ndarray, tank) -> tuple[dict, tuple | None]:
     """[coverage]'s report of the viewpoints ``(N, 6)``, with occlusion on and off, and the occluded
     evaluation (model, report, views per voxel) for the plots. With no viewpoint (no task done yet) the
     report is whole too: every voxel unseen, and the plots say so."""
-    from maptidal.coverage import CoverageModel, CoverageParams
+    from maptidal.evaluation.coverage import CoverageModel, CoverageParams
 
     out, occluded = {}, None
     views = np.asarray(views, float).reshape(-1, 6)
@@ -154,7 +154,7 @@ def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: t
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from maptidal.coverage_plots import plot_histograms, plot_voxel_views
+    from maptidal.evaluation.plots import plot_histograms, plot_voxel_views
 
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     robots = list(document.get("robots", {}))

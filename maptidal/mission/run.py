@@ -49,20 +49,20 @@ from maptidal.allocation.auction import AuctionEvent, AuctionSimulation
 from maptidal.allocation.messages import DONE
 from maptidal.allocation.scoring import AuctionParams, RobotProfile
 from maptidal.allocation.tasks import Task, task_key
-from maptidal.baselines import boustrophedon_viewpoints, voronoi_viewpoints
 from maptidal.camera import StereoCameraParams
 from maptidal.comms.channel import ChannelParams, Outage
 from maptidal.controllers.estimation import rotation_from_rpy
 from maptidal.controllers.flight_modes import lean_stick
 from maptidal.controllers.pose import PoseController
 from maptidal.controllers.trajectory import MotionLimits, PoseReference, PoseTrajectory, Route
-from maptidal.coverage import CoverageModel, CoverageParams, SeenVoxels
 from maptidal.discovery import DiscoveryParams
 from maptidal.envs.rendering import check_render_samples, describe_renderer
 from maptidal.envs.scenario import Scenario, check_current, inside_tank, load_scenario
 from maptidal.envs.simulation import Simulation, check_water_backend
 from maptidal.envs.world import camera_offsets
-from maptidal.free_space import free_space_mask
+from maptidal.evaluation.baselines import boustrophedon_viewpoints, voronoi_viewpoints
+from maptidal.evaluation.coverage import CoverageModel, CoverageParams, SeenVoxels
+from maptidal.evaluation.free_space import free_space_mask
 from maptidal.mission.capture import camera_pose_from_body
 from maptidal.mission.clearance import waiting_point
 from maptidal.mission.outputs import MissionWriter

@@ -279,7 +279,7 @@ class FrontEndRun:
 
     @property
     def discovery_keyframes(self) -> list[Keyframe]:
-        """The keyframes as :func:`maptidal.evaluation.discover_over_keyframes` takes them."""
+        """The keyframes as :func:`maptidal.evaluation.comparison.discover_over_keyframes` takes them."""
         return [output.keyframe for output in self.keyframes]
 
 

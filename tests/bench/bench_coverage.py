@@ -10,8 +10,8 @@ import time
 
 import numpy as np
 
-from maptidal.baselines import strip_to_viewpoints
-from maptidal.coverage import CoverageModel
+from maptidal.evaluation.baselines import strip_to_viewpoints
+from maptidal.evaluation.coverage import CoverageModel
 from maptidal.geometry import _inside_local, _view_frames
 from maptidal.tank import TankModel
 

@@ -506,7 +506,7 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         "the free-space check ignores the far end wall",
         [
             (
-                "maptidal/free_space.py",
+                "maptidal/evaluation/free_space.py",
                 "water_side = positions[:, 0] > tank.far_x",
                 "water_side = positions[:, 0] > -np.inf",
             )

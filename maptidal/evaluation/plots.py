@@ -12,7 +12,7 @@ matplotlib.use("Agg")  # headless: never needs a display
 import matplotlib.pyplot as plt
 import numpy as np
 
-from maptidal.coverage import CoverageReport
+from maptidal.evaluation.coverage import CoverageReport
 from maptidal.files import save_png
 from maptidal.tank import TankModel
 

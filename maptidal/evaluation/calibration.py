@@ -40,14 +40,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from maptidal.baselines import (
+from maptidal.evaluation.baselines import (
     BoustrophedonParams,
     VoronoiParams,
     boustrophedon_viewpoints,
     voronoi_viewpoints,
 )
-from maptidal.coverage import CoverageModel, CoverageParams
-from maptidal.evaluation import PAPER_TABLE
+from maptidal.evaluation.comparison import PAPER_TABLE
+from maptidal.evaluation.coverage import CoverageModel, CoverageParams
 from maptidal.files import save_png
 from maptidal.paths import asset
 from maptidal.tank import TankConfigError, TankModel, tank_config_from_dict

@@ -1,7 +1,7 @@
 """The paper's evaluation on our tank: Map-TIDAL against Voronoi and boustrophedon
 (Section IV.E, Fig. 7 and 8), and the parameter sweep (Table I).
 
-Every method is scored by the same :class:`maptidal.coverage.CoverageModel`, built
+Every method is scored by the same :class:`maptidal.evaluation.coverage.CoverageModel`, built
 once from the tank config. Map-TIDAL runs on the synthetic exploration keyframes
 (:mod:`maptidal.keyframes`), frame by frame, each frame's existing tasks being all
 the tasks found before it. Outputs are written as they are produced, atomically.
@@ -18,18 +18,18 @@ from pathlib import Path
 
 import numpy as np
 
-from maptidal.baselines import (
+from maptidal.camera import StereoCameraParams
+from maptidal.discovery import DiscoveryInputError, DiscoveryParams, DiscoveryResult, discover
+from maptidal.evaluation.baselines import (
     BoustrophedonParams,
     VoronoiParams,
     boustrophedon_viewpoints,
     voronoi_viewpoints,
 )
-from maptidal.camera import StereoCameraParams
-from maptidal.coverage import CoverageModel, CoverageParams, CoverageReport
-from maptidal.discovery import DiscoveryInputError, DiscoveryParams, DiscoveryResult, discover
+from maptidal.evaluation.coverage import CoverageModel, CoverageParams, CoverageReport
+from maptidal.evaluation.free_space import free_space_counts, free_space_mask
 from maptidal.executors import run_jobs
 from maptidal.files import atomic_write_json, atomic_write_text, save_tasks
-from maptidal.free_space import free_space_counts, free_space_mask
 from maptidal.keyframes import (
     ExplorationParams,
     FeatureParams,
@@ -45,7 +45,7 @@ from maptidal.progress import ProgressBar
 from maptidal.tank import TankModel, load_tank_config
 
 # voronoi: Lloyd relaxed to convergence; voronoi_generator: the paper's seed generator as we read it
-# (maptidal.baselines.VoronoiParams); both are set against the paper's one Voronoi row
+# (maptidal.evaluation.baselines.VoronoiParams); both are set against the paper's one Voronoi row
 METHODS = ("maptidal", "voronoi", "voronoi_generator", "boustrophedon")
 CAPTURE_PATHS = ("sweep", "paper")
 
@@ -72,7 +72,7 @@ class EvaluationConfig:
     voronoi: VoronoiParams = field(default_factory=VoronoiParams)
     boustrophedon: BoustrophedonParams = field(default_factory=BoustrophedonParams)
     # drop each keyframe's new tasks that are not in the water or cannot see their target
-    # (maptidal.free_space); off by default, as the paper has no such check
+    # (maptidal.evaluation.free_space); off by default, as the paper has no such check
     free_space: bool = False
     # "paper" (the default): the paper's protocol, 7 keyframes rising 0.5 m in front of the end wall
     # (PaperCaptureParams); "sweep": the two yaw sweeps of ExplorationParams
@@ -191,7 +191,7 @@ def discover_over_keyframes(
 
     A keyframe whose mesh is empty or only degenerate is skipped and logged in its
     frame record, as a real front end would skip it. With ``free_space_tank``, each frame's new tasks
-    that fail :func:`maptidal.free_space.free_space_mask` on that tank are dropped (and counted).
+    that fail :func:`maptidal.evaluation.free_space.free_space_mask` on that tank are dropped (and counted).
     """
     tasks = np.empty((0, 6))
     frames, results = [], []
@@ -327,7 +327,7 @@ def run_compare(
             tank, viewpoints["maptidal"], config.discovery.theta_ex
         ),
         "reports": {name: report.to_dict() for name, report in reports.items()},
-        # where each method's tasks lie (maptidal.free_space), whether or not the check was on
+        # where each method's tasks lie (maptidal.evaluation.free_space), whether or not the check was on
         "free_space": {
             "check": config.free_space,
             **{
@@ -343,7 +343,7 @@ def run_compare(
         save_tasks(out / f"tasks_{name}.json", rows, method=name)
     atomic_write_json(out / "compare.json", document)
     if plots:
-        from maptidal.coverage_plots import plot_histograms, plot_voxel_views
+        from maptidal.evaluation.plots import plot_histograms, plot_voxel_views
 
         plot_histograms(reports, out / "histogram.png", title=f"Views per voxel on {tank.config.name}")
         bar.advance(note="histogram.png")
@@ -506,7 +506,7 @@ def run_sweep(
     if out is not None:
         atomic_write_text(out / "sweep.md", sweep_markdown(rows))
         if plots:
-            from maptidal.coverage_plots import plot_sweep_heatmaps
+            from maptidal.evaluation.plots import plot_sweep_heatmaps
 
             plot_sweep_heatmaps(rows, out / "sweep.png")
     return rows

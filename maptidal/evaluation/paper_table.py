@@ -51,8 +51,8 @@ def _key(t: float, r_ex: float, theta_ex: float) -> tuple[float, float, float]:
 
 
 def side_by_side(rows: list[dict]) -> list[dict]:
-    """Our sweep rows (:func:`maptidal.evaluation.run_sweep`) beside the paper's cells, in the paper's
-    order; raises ValueError if a cell of the paper's grid is missing."""
+    """Our sweep rows (:func:`maptidal.evaluation.comparison.run_sweep`) beside the paper's cells, in the
+    paper's order; raises ValueError if a cell of the paper's grid is missing."""
     ours = {_key(r["t"], r["r_ex"], r["theta_ex"]): r for r in rows}
     cells = []
     for cell in paper_cells():
