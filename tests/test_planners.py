@@ -7,6 +7,7 @@ the mission's filter."""
 from __future__ import annotations
 
 import dataclasses
+import threading
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from maptidal.cli import main
 from maptidal.evaluation.baselines import boustrophedon_viewpoints, voronoi_viewpoints
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import read_events
-from maptidal.mission.run import Mission, MissionParams
+from maptidal.mission.run import Mission, MissionParams, plan_tasks
 from maptidal.tank import TankModel
 
 # a robot keeps 0.35 m from the floor and the surface (the mission's reach margin), and the OSB tank
@@ -61,13 +62,17 @@ def test_a_baseline_mission_discovers_nothing_and_flies_its_plan(voronoi_mission
     assert "| planner | voronoi |" in (out / "report.md").read_text()
 
 
-def test_the_boustrophedon_plan_is_the_baselines_lanes_within_reach(tmp_path):
+def test_the_boustrophedon_plan_is_the_baselines_lanes_within_reach():
     scenario, _ = load_mission(None)
-    mission = Mission(scenario, MissionParams(duration_s=5.0, planner="boustrophedon"), tmp_path)
+    tasks, summary = plan_tasks("boustrophedon", scenario.tank, MissionParams().discovery.standoff)
     rows = boustrophedon_viewpoints(scenario.tank)
     low, high = REACH_BAND_M
-    assert len(mission._planned) == int(((rows[:, 2] >= low) & (rows[:, 2] <= high)).sum()) > 0
-    keys = [t.key for t in mission._planned]
+    within = int(((rows[:, 2] >= low) & (rows[:, 2] <= high)).sum())
+    assert len(tasks) == within > 0 and summary == {
+        "viewpoints": len(rows),
+        "unreachable": len(rows) - within,
+    }
+    keys = [t.key for t in tasks]
     assert len(set(keys)) == len(keys) and all(k >> 16 == 255 for k in keys)  # the plan's own key space
 
 
@@ -80,6 +85,8 @@ def test_a_tank_with_no_reachable_viewpoint_is_refused_in_one_line(tmp_path):
     scenario = dataclasses.replace(scenario, tank=shallow, robots=robots)
     with pytest.raises(ValueError, match="boustrophedon baseline has no viewpoint the robots can reach"):
         Mission(scenario, MissionParams(duration_s=5.0, planner="boustrophedon"), tmp_path)
+    # refused before any worker or drawing thread started
+    assert not [t for t in threading.enumerate() if t.name.startswith("maptidal-gl")]
 
 
 def test_an_unknown_planner_is_refused():

@@ -259,6 +259,32 @@ class MissionParams:
             raise ValueError("a video needs a size of at least 16 x 16 and positive frame rates")
 
 
+def reachable(tank, rows: np.ndarray, standoff_m: float) -> np.ndarray:
+    """Which viewpoint rows ``(N, 6)`` a robot can fly: in the tank's free water (``standoff_m`` before
+    the surface it looks at) and ``REACH_MARGIN_M`` from walls, floor and surface."""
+    keep = free_space_mask(tank, rows, standoff_m) if len(rows) else np.zeros(0, bool)
+    inside = np.array([inside_tank(tank, row[:3], REACH_MARGIN_M) for row in rows], bool)
+    return keep & inside
+
+
+def plan_tasks(planner: str, tank, standoff_m: float) -> tuple[list[Task], dict]:
+    """A baseline's viewpoints from the tank model, as the tasks every robot knows from the start, and
+    the plan's summary (viewpoints, and those out of reach, which are left out, as discovery leaves out
+    its own: :func:`reachable`). ValueError when the tank leaves the baseline no reachable viewpoint."""
+    try:
+        rows = PLANNER_VIEWPOINTS[planner](tank)
+    except ValueError as error:
+        raise ValueError(f"the {planner} baseline cannot plan this tank: {error}") from None
+    ok = reachable(tank, rows, standoff_m)
+    tasks = [Task.create(task_key(PLAN_ORIGIN, k), row[:3], row[3:]) for k, row in enumerate(rows) if ok[k]]
+    if not tasks:
+        raise ValueError(
+            f"the {planner} baseline has no viewpoint the robots can reach in this tank: all {len(rows)} lie "
+            f"within {REACH_MARGIN_M:g} m of a wall, the floor or the surface, or behind a wall"
+        )
+    return tasks, {"viewpoints": len(rows), "unreachable": int((~ok).sum())}
+
+
 def check_rates(params: MissionParams, control_period_s: float) -> None:
     """Refuse frame and command rates faster than the scenario's control period: the loop runs once a
     control period, so a faster rate would only repeat the same frame or command (and a frame rate of
@@ -390,6 +416,12 @@ class Mission:
             for e in params.events
             if e.kind == "outage"
         )
+        # a baseline's plan: a tank it cannot plan is refused before any thread or process starts
+        self._planned: list[Task] = []
+        self.plan_summary: dict = {}
+        if params.planner != "maptidal":
+            standoff = params.discovery.standoff
+            self._planned, self.plan_summary = plan_tasks(params.planner, self.scenario.tank, standoff)
         width, height = params.image_size
         # the perception worker first, so that its start overlaps the simulator's
         self.perception = start_perception(
@@ -492,30 +524,6 @@ class Mission:
         self.video = MissionVideo(self, params) if params.video else None
         # what the captured views have inspected so far (occlusion on), for the progress bar and snapshots
         self.seen = SeenVoxels(CoverageModel.from_tank(self.scenario.tank, CoverageParams(occlusion=True)))
-        self._planned = self._plan_tasks() if params.planner != "maptidal" else []
-
-    def _plan_tasks(self) -> list[Task]:
-        """A baseline's viewpoints from the tank model, as tasks every robot knows from the start. Those
-        the tank's free space cannot hold are left out, and said so, as discovery leaves out its own."""
-        tank = self.scenario.tank
-        try:
-            rows = PLANNER_VIEWPOINTS[self.params.planner](tank)
-        except ValueError as error:
-            raise ValueError(f"the {self.params.planner} baseline cannot plan this tank: {error}") from None
-        reachable = self._reachable(rows)
-        tasks = [
-            Task.create(task_key(PLAN_ORIGIN, k), row[:3], row[3:])
-            for k, row in enumerate(rows)
-            if reachable[k]
-        ]
-        self.plan_summary = {"viewpoints": len(rows), "unreachable": int((~reachable).sum())}
-        if not tasks:
-            raise ValueError(
-                f"the {self.params.planner} baseline has no viewpoint the robots can reach in this tank: all "
-                f"{len(rows)} lie within {REACH_MARGIN_M:g} m of a wall, the floor or the surface, or behind "
-                "a wall"
-            )
-        return tasks
 
     # ----- helpers ------------------------------------------------------------------------------
     def _limits(self) -> MotionLimits:
@@ -662,10 +670,7 @@ class Mission:
         return camera_pose_from_body(estimate.position, rotation_from_rpy(*estimate.rpy), robot.left_offset)
 
     def _reachable(self, rows: np.ndarray) -> np.ndarray:
-        tank = self.scenario.tank
-        keep = free_space_mask(tank, rows, self.params.discovery.standoff) if len(rows) else np.zeros(0, bool)
-        inside = np.array([inside_tank(tank, row[:3], REACH_MARGIN_M) for row in rows], bool)
-        return keep & inside
+        return reachable(self.scenario.tank, rows, self.params.discovery.standoff)
 
     # ----- the loop -------------------------------------------------------------------------------
     def run(self, progress: Callable[[float, int, int, float, float], None] | None = None) -> dict:
