@@ -372,6 +372,9 @@ class Simulation:
         thrusters' lag and their control range (a gain above 1 needs room above full command)."""
         vehicle, gains = self._plants[robot], self._thruster_gains[robot]
         body = self._slots[robot].body_id
+        mass_changed = self.model.body_mass[body] != vehicle.mass or not np.array_equal(
+            self.model.body_inertia[body], vehicle.inertia
+        )
         self.model.body_mass[body] = vehicle.mass
         self.model.body_inertia[body] = vehicle.inertia
         first = self._ctrl_adr[robot]
@@ -379,10 +382,12 @@ class Simulation:
         self.model.actuator_dynprm[actuators, 0] = vehicle.thruster.time_constant_s
         self.model.actuator_ctrlrange[actuators, 0] = -gains
         self.model.actuator_ctrlrange[actuators, 1] = gains
-        # the constants MuJoCo derives from masses when it compiles (body_subtreemass and the like):
-        # without this its mass matrix kept the compiled mass while gravity took the new one. It works
-        # in an MjData of its own, which it moves to qpos0: never the simulation's
-        mujoco.mj_setConst(self.model, mujoco.MjData(self.model))
+        if mass_changed:
+            # the constants MuJoCo derives from masses when it compiles (body_subtreemass and the like):
+            # without this its mass matrix kept the compiled mass while gravity took the new one. It
+            # works in an MjData of its own, which it moves to qpos0: never the simulation's. Only on a
+            # change: set_state puts every plant back, and a rollout may restore a state often
+            mujoco.mj_setConst(self.model, mujoco.MjData(self.model))
 
     def set_sensor_noise(self, robot: str, noise: SensorNoise) -> None:
         """``robot``'s sensor noise levels from now on (:meth:`reset` keeps them)."""
