@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_helpers import assert_one_line_error, run_maptidal
+from cli_helpers import assert_one_line_error, maptidal_here, run_maptidal
 
 from maptidal.executors import run_jobs
 from maptidal.mission.batch import (
@@ -174,7 +174,7 @@ def test_a_batch_gives_the_same_numbers_locally_and_on_ray(tmp_path, ray_cluster
     ],
 )
 def test_bad_batch_arguments_give_one_line(tmp_path, arguments, message):
-    assert_one_line_error(run_maptidal("batch", *arguments, "--out", tmp_path / "b"), message)
+    assert_one_line_error(maptidal_here("batch", *arguments, "--out", tmp_path / "b"), message)
 
 
 def test_parse_planners():

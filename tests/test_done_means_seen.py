@@ -81,7 +81,9 @@ def test_a_lying_estimator_claims_tasks_the_evaluation_does_not_count(tmp_path, 
 
 def test_a_vehicle_that_cannot_pitch_declines_pitched_views_and_never_marks_them_done(tmp_path):
     scenario, _ = load_mission(None)
-    document = Mission(scenario, MissionParams(duration_s=45.0, seed=3, max_pitch_deg=0.0), tmp_path).run()
+    document = Mission(
+        scenario, MissionParams(duration_s=45.0, seed=3, max_pitch_deg=0.0, discovery_mode="paper"), tmp_path
+    ).run()
     events = read_events(tmp_path)
     declined = [e for e in events if e["kind"] == "declined"]
     assert declined and all("deg of pitch" in e["reason"] for e in declined)

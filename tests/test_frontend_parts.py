@@ -11,7 +11,7 @@ import math
 import cv2
 import numpy as np
 import pytest
-from cli_helpers import assert_one_line_error, run_maptidal
+from cli_helpers import assert_one_line_error, maptidal_here, run_maptidal
 from scipy.spatial.transform import Rotation
 
 from maptidal.perception.keyframing import KeyframeParams, KeyframeSelector
@@ -113,7 +113,9 @@ def test_bad_recordings_give_one_line_and_status_2(tmp_path, how, message):
     root = tmp_path / "rec"
     _write(root)
     _break(root, how)
-    assert_one_line_error(run_maptidal("discover-frames", root, "--out", tmp_path / "out", "--json"), message)
+    assert_one_line_error(
+        maptidal_here("discover-frames", root, "--out", tmp_path / "out", "--json"), message
+    )
 
 
 def test_a_recording_without_ground_truth_is_told_to_use_its_own_poses(tmp_path):

@@ -18,7 +18,15 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 INSTALLED_AS = {"maptidal": "maptidal", "envs": "maptidal.envs", "controllers": "maptidal.controllers"}
-ALGORITHMS = ("discovery", "perception", "allocation", "comms", "evaluation.coverage", "geometry")
+ALGORITHMS = (
+    "discovery",
+    "map_discovery",
+    "perception",
+    "allocation",
+    "comms",
+    "evaluation.coverage",
+    "geometry",
+)
 ALGORITHM_THIRD_PARTY = {"numpy", "scipy", "trimesh", "cv2"}
 
 

@@ -91,7 +91,15 @@ def missions(tmp_path_factory):
             error, relocalise = MISSIONS[name]
             scenario, _ = load_mission(None)
             out = tmp_path_factory.mktemp(name)
-            params = MissionParams(duration_s=300.0, seed=2, motion_model_error=error, relocalise=relocalise)
+            # the paper's discovery, as when these bounds were measured: its many tasks keep the robots
+            # flying, and localisation under way is what is tested
+            params = MissionParams(
+                duration_s=300.0,
+                seed=2,
+                motion_model_error=error,
+                relocalise=relocalise,
+                discovery_mode="paper",
+            )
             done[name] = (Mission(scenario, params, out).run(), out)
         return done[name]
 

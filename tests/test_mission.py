@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 import pytest
-from cli_helpers import assert_one_line_error, run_maptidal
+from cli_helpers import assert_one_line_error, maptidal_here, run_maptidal
 
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import read_events
@@ -26,7 +26,9 @@ from maptidal.mission.run import Mission, MissionParams
 def short_mission(tmp_path_factory):
     scenario, _ = load_mission(None)
     out = tmp_path_factory.mktemp("mission")
-    mission = Mission(scenario, MissionParams(duration_s=45.0, seed=3), out)
+    # the paper's discovery: these tests of the loop's workings need the many tasks it finds, and an
+    # unfinished mission (README, "Map-aware discovery")
+    mission = Mission(scenario, MissionParams(duration_s=45.0, seed=3, discovery_mode="paper"), out)
     document = mission.run()
     return mission, document, out
 
@@ -144,7 +146,9 @@ def test_the_same_seed_gives_the_same_mission_with_perception_apart_or_inline(sh
     _, first, first_out = short_mission
     assert first["parallel"]["perception"] == "process"
     again = Mission(
-        scenario, MissionParams(duration_s=45.0, seed=3, perception_process=False), tmp_path
+        scenario,
+        MissionParams(duration_s=45.0, seed=3, perception_process=False, discovery_mode="paper"),
+        tmp_path,
     ).run()
     assert again["parallel"]["perception"] == "inline"
     assert again["tasks"] == first["tasks"]
@@ -217,9 +221,9 @@ def test_a_report_never_invents_figures_and_names_the_file_it_cannot_read(short_
     events = out / "events.jsonl"
     lines = events.read_text().splitlines()
     events.write_text("\n".join([lines[0], '{"t": 1.0, "robot": "rov0"}', *lines[1:]]) + "\n")
-    assert_one_line_error(run_maptidal("report", out), "events.jsonl, line 2: an event needs a 'kind'")
+    assert_one_line_error(maptidal_here("report", out), "events.jsonl, line 2: an event needs a 'kind'")
     events.write_text("")
-    assert_one_line_error(run_maptidal("report", out), "the event log is empty")
+    assert_one_line_error(maptidal_here("report", out), "the event log is empty")
 
 
 @pytest.mark.parametrize("write", ["snapshot", "final"])
@@ -313,7 +317,7 @@ def test_bad_mission_files_give_one_line_and_status_2(tmp_path, mission_table, m
     base = asset("scenarios", "mission.toml").read_text()
     path = tmp_path / "bad.toml"
     path.write_text(base + "\n" + mission_table)
-    assert_one_line_error(run_maptidal("run", "--scenario", path, "--out", tmp_path / "o"), message)
+    assert_one_line_error(maptidal_here("run", "--scenario", path, "--out", tmp_path / "o"), message)
 
 
 def test_a_robot_outside_the_tank_is_refused(tmp_path):
@@ -322,7 +326,7 @@ def test_a_robot_outside_the_tank_is_refused(tmp_path):
     text = asset("scenarios", "mission.toml").read_text().replace("[-1.6, 0.6, 1.0]", "[-1.6, 0.6, 9.0]")
     path = tmp_path / "outside.toml"
     path.write_text(text)
-    assert_one_line_error(run_maptidal("run", "--scenario", path, "--out", tmp_path / "o"))
+    assert_one_line_error(maptidal_here("run", "--scenario", path, "--out", tmp_path / "o"))
 
 
 def test_a_failed_robots_tasks_pass_to_the_survivor(tmp_path):
@@ -376,7 +380,10 @@ def test_a_robot_joins_the_mission_and_the_auction_when_its_time_comes(tmp_path)
     from maptidal.mission.run import MissionEvent
 
     scenario = _third_robot(load_mission(None)[0])
-    params = MissionParams(duration_s=32.0, seed=2, events=(MissionEvent(15.0, "join", "rov2"),))
+    # the paper's discovery, whose many tasks give the late robot some to win
+    params = MissionParams(
+        duration_s=32.0, seed=2, events=(MissionEvent(15.0, "join", "rov2"),), discovery_mode="paper"
+    )
     mission = Mission(scenario, params, tmp_path)
     document = mission.run()
     senders = [(t, owner) for t, owner, _ in mission.auction.transmissions]
@@ -698,7 +705,7 @@ def test_drawing_on_the_loops_own_thread_gives_the_same_mission(short_mission, t
     monkeypatch.setattr(run_module, "_drawing_thread", run_module._SameThread)
     scenario, _ = load_mission(None)
     _, first, first_out = short_mission
-    again = Mission(scenario, MissionParams(duration_s=45.0, seed=3), tmp_path)
+    again = Mission(scenario, MissionParams(duration_s=45.0, seed=3, discovery_mode="paper"), tmp_path)
     assert isinstance(again._gl, run_module._SameThread)
     document = again.run()
     assert document["tasks"] == first["tasks"] and document["comms"] == first["comms"]

@@ -160,7 +160,7 @@ def test_a_flight_mode_that_cannot_be_flown_is_refused(options, message):
 def test_maptidal_sim_flies_the_mode_and_gain_asked_for():
     import json
 
-    from cli_helpers import assert_one_line_error, run_maptidal
+    from cli_helpers import assert_one_line_error, maptidal_here, run_maptidal
 
     heights = {}
     for mode in ("stabilize", "alt_hold"):
@@ -170,4 +170,4 @@ def test_maptidal_sim_flies_the_mode_and_gain_asked_for():
         assert result["flight_mode"] == mode and result["pilot_gain"] == 1.0
         heights[mode] = result["robots"]["rov0"]["position_m"][2]
     assert heights["stabilize"] > heights["alt_hold"] + 0.1  # STABILIZE floats up; ALT_HOLD holds
-    assert_one_line_error(run_maptidal("sim", "--pilot-gain", "2"), "pilot gain")
+    assert_one_line_error(maptidal_here("sim", "--pilot-gain", "2"), "pilot gain")

@@ -37,14 +37,35 @@ def _group_gone(pgid: int, within_s: float) -> bool:
     return False
 
 
-def _signal_at(args: list[str], number: int, delay_s: float) -> tuple[int, list[str], str, bool]:
-    """Run the command in a session of its own, send ``number`` after ``delay_s``; its status, the stderr
-    lines that are not progress lines, all of stderr, and whether every process of it has ended."""
+def _group_size(pgid: int) -> int:
+    """How many live processes are in process group ``pgid`` (read from /proc)."""
+    count = 0
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            count += fields[0] != "Z" and int(fields[2]) == pgid
+    return count
+
+
+def _signal_at(
+    args: list[str], number: int, delay_s: float, after_processes: int = 0
+) -> tuple[int, list[str], str, bool]:
+    """Run the command in a session of its own, send ``number`` after ``delay_s`` (counted from the
+    moment its group holds ``after_processes`` processes, when given: a slow machine imports slowly);
+    its status, the stderr lines that are not progress lines, all of stderr, and whether every process
+    of it has ended."""
     process = subprocess.Popen(
         _command(*args), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True
     )
+    deadline = time.monotonic() + 60.0
+    while after_processes and _group_size(process.pid) < after_processes and time.monotonic() < deadline:
+        time.sleep(0.05)
     time.sleep(delay_s)
     process.send_signal(number)
+    _signal_at.sent_at = time.monotonic()  # for a test that times the way out
     try:
         _, err = process.communicate(timeout=90)
     except subprocess.TimeoutExpired:
@@ -117,18 +138,20 @@ def test_ctrl_c_on_every_long_command_is_one_line_and_130(name, delay_s, tmp_pat
 
 
 def test_ctrl_c_on_a_parallel_batch_stops_its_workers_at_once(tmp_path):
-    # the batch's missions are long (120 s simulated each): waiting for them would take a minute or more
-    start = time.monotonic()
+    # the batch's missions are long (120 s simulated each): waiting for them would take a minute or more.
+    # The signal goes 1.5 s after both workers exist (the command and its two workers), whatever the
+    # machine's speed: a fixed delay once landed in the imports of a slow machine, before any worker.
     status, lines, err, gone = _signal_at(
         ["batch", "--seeds", "1-2", "--duration", "120", "--jobs", "2", "--out", str(tmp_path / "batch")],
         signal.SIGINT,
-        4.0,
+        1.5,
+        after_processes=3,
     )
     assert status == 130, err
     assert len(lines) == 1 and "maptidal batch: interrupted" in lines[0], err
     assert "Traceback" not in err, err
     assert gone, "a worker of the batch outlived it"
-    assert time.monotonic() - start < 30.0
+    assert time.monotonic() - _signal_at.sent_at < 30.0
 
 
 def test_a_run_interrupted_in_the_loop_says_how_to_rebuild_its_report(tmp_path):

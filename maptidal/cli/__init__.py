@@ -31,7 +31,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-from maptidal.cli.interrupts import Interrupts
+from maptidal.cli.interrupts import Interrupts, prefix_from_argv
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -47,7 +47,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         except KeyboardInterrupt:
             app = None
         if app is None or interrupts.received is not None:  # during the imports, swallowed or not
-            print(interrupts.message("maptidal"), file=sys.stderr)
+            print(interrupts.message(prefix_from_argv(argv)), file=sys.stderr)
             return interrupts.status
         return app.main(argv, interrupts)
 

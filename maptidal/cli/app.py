@@ -14,7 +14,7 @@ from importlib.metadata import PackageNotFoundError, version
 from maptidal import progress
 from maptidal.cli import allocation, discovery, evaluation, mavlink, mission, perception, world
 from maptidal.cli.common import EXIT_BAD_INPUT, Parser, RunError, UsageError, check_gl_backend
-from maptidal.cli.interrupts import EXIT_INTERRUPTED, EXIT_TERMINATED, Interrupts
+from maptidal.cli.interrupts import EXIT_INTERRUPTED, EXIT_TERMINATED, Interrupts, prefix_from_argv
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "build_parser", "main"]
 
@@ -82,7 +82,7 @@ def main(argv: Sequence[str] | None = None, interrupts: Interrupts | None = None
         print(err, file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        return _interrupted(interrupts, "maptidal", None)
+        return _interrupted(interrupts, prefix_from_argv(argv), None)
     prefix = f"maptidal {args.subcommand}"
     try:
         check_gl_backend()

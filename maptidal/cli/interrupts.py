@@ -19,8 +19,11 @@ Light on purpose: only the standard library, since it runs before the rest is im
 from __future__ import annotations
 
 import os
+import re
 import signal
+import sys
 import threading
+from collections.abc import Sequence
 
 EXIT_INTERRUPTED = 128 + signal.SIGINT  # 130
 EXIT_TERMINATED = 128 + signal.SIGTERM  # 143
@@ -88,3 +91,11 @@ class Interrupts:
         """The one line to print: what ended the command, that its files are complete, and ``hint``."""
         what = "terminated (SIGTERM)" if self.received == signal.SIGTERM else "interrupted"
         return f"{prefix}: {what}; files written so far are complete{hint}"
+
+
+def prefix_from_argv(argv: Sequence[str] | None) -> str:
+    """``maptidal SUBCOMMAND`` from the raw arguments, for a message printed before parsing finished
+    (a Ctrl-C during the imports still names the command the user typed)."""
+    words = list(sys.argv[1:] if argv is None else argv)
+    command = next((word for word in words if not word.startswith("-")), "")
+    return f"maptidal {command}" if re.fullmatch(r"[a-z][a-z0-9-]*", command) else "maptidal"

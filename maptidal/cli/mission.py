@@ -54,6 +54,14 @@ def register(commands) -> None:
         "start, flown with the same robots, controllers, channel and CBBA",
     )
     run.add_argument(
+        "--discovery",
+        choices=("map-aware", "paper"),
+        help="how the maptidal planner discovers tasks in the loop (default: the scenario's, else "
+        "map-aware): map-aware works on each robot's own fused map and free space and reads no tank "
+        "model; paper runs the paper's Algorithms 1-3 on each keyframe's mesh, its tasks then kept where "
+        "the tank model's water is free",
+    )
+    run.add_argument(
         "--video",
         action="store_true",
         help="also write mission.mp4: a camera behind the team with each robot's view inset, two frames "
@@ -104,6 +112,11 @@ def register(commands) -> None:
         help="fly each seed with each planner: all, or a comma list of maptidal, voronoi and "
         "boustrophedon (default: the scenario's planner); batch.md then compares them",
     )
+    batch.add_argument(
+        "--discovery",
+        choices=("map-aware", "paper"),
+        help="the maptidal planner's discovery mode (default: the scenario's, else map-aware)",
+    )
     add_executor_args(batch, "missions")
     add_output_folder(batch, "runs/batch")
     batch.set_defaults(handler=run_batch_command)
@@ -117,7 +130,13 @@ def run_mission(args: argparse.Namespace) -> int:
     from maptidal.progress import ProgressBar
 
     scenario, params = prepare_mission(
-        args.scenario, args.robots, args.duration, args.pose, args.seed, planner=args.planner
+        args.scenario,
+        args.robots,
+        args.duration,
+        args.pose,
+        args.seed,
+        planner=args.planner,
+        discovery=args.discovery,
     )
     if args.video:
         params = dataclasses.replace(params, video=True)
@@ -181,6 +200,7 @@ def run_batch_command(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         pose_source=args.pose,
         planners=planners,
+        discovery=args.discovery,
     )
     several = planners is not None and len(planners) > 1
     print(planners_markdown(summary, len(seeds)) if several else batch_markdown(summary, len(rows)))

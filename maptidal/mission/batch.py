@@ -64,6 +64,7 @@ class BatchRun:
     duration_s: float | None = None
     pose_source: str | None = None
     planner: str | None = None
+    discovery: str | None = None
 
 
 def parse_planners(text: str) -> list[str]:
@@ -103,7 +104,13 @@ def run_one(run: BatchRun) -> dict:
     from maptidal.mission.run import Mission
 
     scenario, params = prepare_mission(
-        run.scenario, run.robots, run.duration_s, run.pose_source, run.seed, planner=run.planner
+        run.scenario,
+        run.robots,
+        run.duration_s,
+        run.pose_source,
+        run.seed,
+        planner=run.planner,
+        discovery=run.discovery,
     )
     document = Mission(scenario, params, run.out_dir).run()
     folder = Path(run.out_dir)
@@ -235,6 +242,7 @@ def run_batch(
     pose_source: str | None = None,
     progress: bool = True,
     planners: list[str] | None = None,
+    discovery: str | None = None,
 ) -> tuple[list[dict], dict]:
     """Fly a mission per seed (module docstring), or per planner and seed; returns the rows in order
     (planner, then seed) and the aggregate (one per planner with several planners).
@@ -246,7 +254,7 @@ def run_batch(
         raise ValueError("no seeds to run")
     several = planners is not None and len(planners) > 1
     for planner in planners or [None]:  # fail fast on a bad file, override or plan
-        prepare_mission(scenario, robots, duration_s, pose_source, planner=planner)
+        prepare_mission(scenario, robots, duration_s, pose_source, planner=planner, discovery=discovery)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     runs = [
@@ -258,6 +266,7 @@ def run_batch(
             duration_s,
             pose_source,
             planner,
+            discovery,
         )
         for planner in planners or [None]
         for seed in seeds

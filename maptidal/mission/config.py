@@ -12,6 +12,8 @@
     render_samples = 4     # the images' anti-aliasing samples (0: off, about twice as fast on a CPU)
     perception_process = true  # perception and discovery in a worker process (false: inline, slower)
     water_backend = "prefer-gl"  # where the water model runs: prefer-gl, gl, cpu or auto (Simulation's)
+    planner = "maptidal"   # where tasks come from: maptidal (discovered), voronoi or boustrophedon
+    discovery = "map-aware"  # maptidal's discovery in the loop: map-aware (the robot's own map) or paper
     [[mission.events]]
     time_s = 60
     kind = "fail"          # rov1 stops and falls silent
@@ -62,12 +64,14 @@ MISSION_KEYS = {
     "perception_process",
     "water_backend",
     "planner",
+    "discovery",
 }
 # the [mission] keys that are not plain numbers, and what they must be
 SETTING_TYPES: dict[str, type] = {
     "pose_source": str,
     "water_backend": str,
     "planner": str,
+    "discovery": str,
     "render_samples": int,
     "perception_process": bool,
     "relocalise": bool,
@@ -120,6 +124,8 @@ def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
         except (TypeError, ValueError) as err:
             raise ValueError(f"{path}: mission event {number}: {err}") from None
     settings["events"] = tuple(events)
+    if "discovery" in settings:  # MissionParams.discovery holds the paper's parameters; this is the mode
+        settings["discovery_mode"] = settings.pop("discovery")
     return scenario, settings
 
 
@@ -130,10 +136,11 @@ def prepare_mission(
     pose_source: str | None = None,
     seed: int = 0,
     planner: str | None = None,
+    discovery: str | None = None,
 ) -> tuple[Scenario, MissionParams]:
     """The scenario and the MissionParams of a mission file, with the command line's overrides: the first
-    ``robots`` robots, the duration, the front end's pose source and the planner (``maptidal run`` and
-    ``batch``)."""
+    ``robots`` robots, the duration, the front end's pose source, the planner and the discovery mode
+    (``maptidal run`` and ``batch``)."""
     scenario, settings = load_mission(path)
     if robots is not None:
         if not 1 <= robots <= len(scenario.robots):
@@ -145,6 +152,8 @@ def prepare_mission(
         settings["pose_source"] = pose_source
     if planner is not None:
         settings["planner"] = planner
+    if discovery is not None:
+        settings["discovery_mode"] = discovery
     params = MissionParams(seed=seed, **settings)
     check_events(params.events, [r.name for r in scenario.robots])
     return scenario, params

@@ -26,6 +26,7 @@ import numpy as np
 
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
 from maptidal.executors import release_in_child, signals_held
+from maptidal.map_discovery import RobotMap, discover_on_map
 from maptidal.perception.frontend import FrontEnd
 from maptidal.perception.recording import CameraPose
 
@@ -45,6 +46,9 @@ class FrameJob:
     pose: CameraPose
     dead_reckoned: CameraPose
     existing: np.ndarray
+    # where each teammate's last message put it, and how old that message was: rows (x, y, z, age_s);
+    # map-aware discovery leaves a teammate out of the map (maptidal.map_discovery.near_teammates)
+    teammates: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -64,10 +68,16 @@ class FrameResult:
     new_tasks: np.ndarray
     perception_s: float
     discovery_s: float
+    # map-aware discovery: how many candidates each of its rules removed (MapAwareResult.counts)
+    rules: dict[str, int] | None = None
 
 
-def perceive(front: FrontEnd, job: FrameJob, discovery: DiscoveryParams) -> FrameResult:
-    """Run ``front`` on ``job``'s frame and, at a keyframe, discovery on its mesh."""
+def perceive(
+    front: FrontEnd, job: FrameJob, discovery: DiscoveryParams, robot_map: RobotMap | None = None
+) -> FrameResult:
+    """Run ``front`` on ``job``'s frame and, at a keyframe, discovery on its mesh: the paper's
+    (:func:`maptidal.discovery.discover`), or, given the robot's own ``robot_map``, the map-aware one
+    (:func:`maptidal.map_discovery.discover_on_map`), after folding the keyframe into that map."""
     start = time.perf_counter()
     record, keyframe = front.process(0, job.time_s, job.left, job.right, job.pose)
     correction, sigma = None, None
@@ -75,13 +85,33 @@ def perceive(front: FrontEnd, job: FrameJob, discovery: DiscoveryParams) -> Fram
         correction = (record.pose.position - job.dead_reckoned.position)[:2]
         sigma = front.odometry.sigma_m
     perception_s = time.perf_counter() - start
-    faces, new = 0, np.zeros((0, 6))
+    faces, new, rules = 0, np.zeros((0, 6)), None
     if keyframe is not None and len(keyframe.keyframe.mesh.faces):
         start = time.perf_counter()
         mesh = keyframe.keyframe.mesh
         faces = len(mesh.faces)
         try:
-            new = discover(mesh.vertices, mesh.faces, existing=job.existing, params=discovery).final
+            if robot_map is None:
+                new = discover(mesh.vertices, mesh.faces, existing=job.existing, params=discovery).final
+            else:
+                frame = keyframe.keyframe
+                robot_map.add_keyframe(
+                    frame.position, frame.landmark_ids, frame.landmarks, teammates=job.teammates
+                )
+                pose = keyframe.pose
+                robot_map.carve_view(
+                    pose.position, pose.rotation, front.intrinsics, mesh.vertices, mesh.faces
+                )
+                found = discover_on_map(
+                    robot_map,
+                    mesh.vertices,
+                    mesh.faces,
+                    frame.position,
+                    job.existing,
+                    discovery,
+                    teammates=job.teammates,
+                )
+                new, rules = found.final, found.counts()
         except DiscoveryInputError:
             new = np.zeros((0, 6))  # a degenerate keyframe mesh finds nothing; the mission goes on
         discovery_s = time.perf_counter() - start
@@ -97,6 +127,7 @@ def perceive(front: FrontEnd, job: FrameJob, discovery: DiscoveryParams) -> Fram
         new,
         perception_s,
         discovery_s,
+        rules,
     )
 
 
@@ -109,18 +140,24 @@ class InlinePerception:
     def __init__(self) -> None:
         self.fronts: dict[str, FrontEnd] = {}
         self.discovery = DiscoveryParams()
+        self.maps: dict[str, RobotMap] = {}
         self._results: dict[str, FrameResult] = {}
         self.wait_s = 0.0  # nothing to wait for: the work is done at submit
 
-    def configure(self, fronts: dict[str, FrontEnd], discovery: DiscoveryParams) -> None:
-        """The robots' front ends and the discovery parameters, before the first job."""
-        self.fronts, self.discovery = fronts, discovery
+    def configure(
+        self, fronts: dict[str, FrontEnd], discovery: DiscoveryParams, maps: dict[str, RobotMap] | None = None
+    ) -> None:
+        """The robots' front ends, the discovery parameters and, for map-aware discovery, each robot's own
+        map, before the first job."""
+        self.fronts, self.discovery, self.maps = fronts, discovery, maps or {}
 
     def submit(self, job: FrameJob) -> None:
         """Process ``job`` now; its result waits for :meth:`result`."""
         if job.robot in self._results:
             raise RuntimeError(f"{job.robot} already has a frame in perception")
-        self._results[job.robot] = perceive(self.fronts[job.robot], job, self.discovery)
+        self._results[job.robot] = perceive(
+            self.fronts[job.robot], job, self.discovery, self.maps.get(job.robot)
+        )
 
     def pending(self, robot: str) -> bool:
         """Whether ``robot`` has a frame whose result has not been taken."""
@@ -164,12 +201,12 @@ def _serve(connection, blocks: dict, shape: tuple) -> None:
     setup = jobs.get()
     if setup is None:
         return
-    fronts, discovery = setup
+    fronts, discovery, maps = setup
     while (job := jobs.get()) is not None:
         pair = images[job.robot]
         job = dataclasses.replace(job, left=pair[0].copy(), right=pair[1].copy())
         try:
-            answer = perceive(fronts[job.robot], job, discovery)
+            answer = perceive(fronts[job.robot], job, discovery, maps.get(job.robot))
         except Exception:  # sent back whole, raised in the mission
             answer = RuntimeError(
                 f"perception of {job.robot}'s frame at {job.time_s:.2f} s failed:\n" + traceback.format_exc()
@@ -207,11 +244,14 @@ class PerceptionProcess:
         self._results: dict[str, FrameResult] = {}
         self.wait_s = 0.0  # time the mission spent waiting for the worker
 
-    def configure(self, fronts: dict[str, FrontEnd], discovery: DiscoveryParams) -> None:
-        """Send the robots' front ends (one per robot named at the start) and the discovery parameters."""
+    def configure(
+        self, fronts: dict[str, FrontEnd], discovery: DiscoveryParams, maps: dict[str, RobotMap] | None = None
+    ) -> None:
+        """Send the robots' front ends (one per robot named at the start), the discovery parameters and,
+        for map-aware discovery, each robot's own map (kept and grown in the worker)."""
         if set(fronts) != set(self._images):
             raise ValueError(f"front ends for {sorted(fronts)}, but the worker serves {sorted(self._images)}")
-        self._send((fronts, discovery))
+        self._send((fronts, discovery, maps or {}))
 
     def submit(self, job: FrameJob) -> None:
         """Send ``job`` to the worker."""

@@ -63,6 +63,7 @@ from maptidal.envs.world import camera_offsets
 from maptidal.evaluation.baselines import boustrophedon_viewpoints, voronoi_viewpoints
 from maptidal.evaluation.coverage import CoverageModel, CoverageParams, SeenVoxels
 from maptidal.evaluation.free_space import free_space_mask
+from maptidal.map_discovery import MapAwareParams, RobotMap
 from maptidal.mission.capture import camera_pose_from_body
 from maptidal.mission.clearance import waiting_point
 from maptidal.mission.outputs import MissionWriter
@@ -117,6 +118,10 @@ class MissionEvent:
 MAX_DURATION_S = 86400.0  # a day of simulated time: longer than any battery a BlueROV2 carries
 # where a mission's tasks come from (MissionParams.planner), and the baselines' viewpoints
 PLANNERS = ("maptidal", "voronoi", "boustrophedon")
+# how the "maptidal" planner discovers tasks in the loop: "paper", the paper's Algorithms 1-3 on each
+# keyframe's mesh, its tasks then checked against the tank model's free water; "map-aware", on the robot's
+# own fused map with its own free space (maptidal.map_discovery), reading no tank model
+DISCOVERY_MODES = ("paper", "map-aware")
 PLANNER_VIEWPOINTS = {"voronoi": voronoi_viewpoints, "boustrophedon": boustrophedon_viewpoints}
 # the origin byte of a mission plan's task keys (maptidal.allocation.tasks.task_key): robots mint theirs
 # from their own index, at most 255 robots below it
@@ -207,6 +212,12 @@ class MissionParams:
     # fly; "voronoi" or "boustrophedon", the paper's baselines, whose viewpoints are given a priori from
     # the tank model, as the baselines require, and known to every robot from the start (a mission plan)
     planner: str = "maptidal"
+    # DISCOVERY_MODES. The default is "map-aware", decided before it was measured, on this reasoning: a
+    # robot in the water has no tank model, and "paper" keeps its tasks only where the tank model says the
+    # water is free, so the loop would rest on knowledge the method claims not to need; the map-aware mode
+    # uses only what the robot sensed. `maptidal discover` stays paper-exact either way
+    discovery_mode: str = "map-aware"
+    map_aware: MapAwareParams = field(default_factory=MapAwareParams)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.duration_s) and 0 < self.duration_s <= MAX_DURATION_S):
@@ -223,6 +234,8 @@ class MissionParams:
             raise ValueError(f"pose source must be one of {POSE_SOURCES}, got {self.pose_source!r}")
         if self.planner not in PLANNERS:
             raise ValueError(f"planner must be one of {PLANNERS}, got {self.planner!r}")
+        if self.discovery_mode not in DISCOVERY_MODES:
+            raise ValueError(f"discovery must be one of {DISCOVERY_MODES}, got {self.discovery_mode!r}")
         if not (
             self.frame_rate_hz > 0
             and self.frame_rate_no_dvl_hz > 0
@@ -503,7 +516,13 @@ class Mission:
         channel = dataclasses.replace(params.channel, outages=params.channel.outages + outages)
         self.auction = AuctionSimulation(profiles, [], channel, AuctionParams(), params.agent, events=joining)
         self.writer = MissionWriter(out_dir)
-        self.perception.configure(fronts, params.discovery)
+        maps = None
+        if params.discovery_mode == "map-aware" and params.planner == "maptidal":
+            # the surface's height is the depth sensor's datum, the one the robots' estimators place
+            # their depth with; nothing else of the tank is given
+            map_params = dataclasses.replace(params.map_aware, surface_z=self.scenario.tank.height)
+            maps = {name: RobotMap(map_params) for name in fronts}
+        self.perception.configure(fronts, params.discovery, maps)
         # the robots' cameras render on a thread of their own, beside the physics (MuJoCo lets go of
         # Python's lock while it draws): the renderer, and its GL context, are made there, and every draw
         # of this simulation's cameras happens there. The loop takes a snapshot of the scene at the frame's
@@ -586,6 +605,12 @@ class Mission:
             ]
         )
         robot.lost_since_s = now
+
+    def _teammates_heard(self, robot: _Robot, now: float) -> np.ndarray:
+        """Rows ``(x, y, z, age_s)``: where each teammate's last message put it, and how long ago."""
+        heard = self.auction.agents[robot.index].peer_positions.values()
+        rows = [[*np.asarray(position, float)[:3], now - heard_s] for position, heard_s in heard]
+        return np.array(rows, float).reshape(-1, 4)
 
     def _keep_clear(self, robot: _Robot, reference: PoseReference, now: float) -> PoseReference:
         """The reference held where the robot's straight way to it would enter the ``clearance_m``
@@ -874,6 +899,7 @@ class Mission:
             self._camera_pose(robot, base),
             self._camera_pose(robot, "dr"),
             existing,
+            self._teammates_heard(robot, now),
         )
         self._frames[robot.name] = self._gl.submit(self._draw_frame, snapshot, job)
 
@@ -916,7 +942,10 @@ class Mission:
         start = time.perf_counter()
         agent = self.auction.agents[robot.index]
         new = result.new_tasks
-        reachable = self._reachable(new)
+        if self.params.discovery_mode == "map-aware":
+            reachable = np.ones(len(new), bool)  # checked on the robot's own map, in its perception
+        else:
+            reachable = self._reachable(new)
         for row, ok in zip(new, reachable, strict=True):
             if not ok:
                 continue
@@ -939,6 +968,7 @@ class Mission:
             new_tasks=len(new),
             reachable=int(reachable.sum()),
             frame_s=round(result.time_s, 3),
+            **({"rules": result.rules} if result.rules is not None else {}),
         )
         self.timing["allocation"] += time.perf_counter() - start
 
@@ -1122,6 +1152,7 @@ class Mission:
         conflicts = self.auction.report(converged=False).conflicts  # tasks in two live bundles now
         return {
             "planner": self.params.planner,
+            "discovery": self.params.discovery_mode,
             # a baseline's plan: its viewpoints, and those out of the robots' reach, left out at the start
             **({"plan": self.plan_summary} if self._planned else {}),
             "finished": finished,

@@ -1,0 +1,481 @@
+"""Map-aware task discovery for the closed loop (issue [loop]): candidates from the robot's own fused map.
+
+The paper's discovery (:mod:`maptidal.discovery`, Algorithms 1-3, kept exact for ``maptidal discover``)
+runs on one keyframe's raw mesh. In the loop that yields tasks from faces that bridge two surfaces, tasks
+behind walls or under the floor, and hundreds of near-duplicates of views the team already holds. This
+mode keeps the paper's idea (a candidate viewpoint ``standoff`` in front of each mesh face, looking back at
+it) and adds five rules, each with its reason:
+
+1. **The robot's own fused map.** :class:`RobotMap` accumulates, keyframe after keyframe, every fused
+   landmark (the front end's information-form fusion, so a landmark seen ten times sits where its ten
+   observations agree) and the free space the camera saw through. Discovery reads that map, not one
+   keyframe's faces alone: one keyframe sees a strip of wall; the map holds the wall.
+2. **Normals from local surface fits.** A face's normal is the smallest principal axis of the map points
+   within ``support_radius_m`` of its centroid (the least-squares plane, as in Hoppe et al. 1992,
+   "Surface reconstruction from unorganized points"), turned to face the camera that saw the face. One
+   face's normal comes from three noisy landmarks; a plane through a dozen or more is steadier. A centroid
+   with fewer than ``min_support`` points nearby has no fit and yields no candidate.
+3. **No candidates on faces that bridge surfaces.** The fit must be planar: its surface variation
+   ``lambda_0 / (lambda_0 + lambda_1 + lambda_2)`` (Pauly et al. 2002, "Efficient simplification of point-
+   sampled surfaces") at most ``max_surface_variation``, which a flat patch meets under stereo noise and
+   the crease between a wall and the floor does not. And the face itself must lie on that plane: each
+   vertex and the centroid within ``plane_tolerance_m`` of it. A face spanning a wall and the floor, or a
+   near wall and a far one, has its centroid in open water, off every plane.
+4. **Free space from the robot's own map.** A viewpoint is kept only where the robot has seen water:
+   its voxel was crossed by a ray from a camera to a landmark it saw (space carving; nothing behind a
+   wall or under the floor is ever crossed), no landmark lies within ``clearance_m`` of it, it is
+   ``clearance_m`` below the surface (the depth sensor's datum, ``surface_z``), and no landmark lies on
+   its line of sight to the face. No tank model and no simulator truth is read.
+5. **Views that add little are dropped.** Each candidate sees a set of map points (those in its
+   frustum, on a voxel grid of ``coverage_voxel_m``). A greedy cover (the standard greedy algorithm for
+   set cover, Chvatal 1979) takes the candidate that sees the most points no view yet covers, the views
+   of every task the robot knows (planned, captured or assigned, its own or a teammate's) counting as
+   covered, until no candidate adds ``min_new_fraction`` of its own view and ``min_new_points`` points.
+   The 0.3 mirrors the paper's confirmation threshold: there a view that holds 75 % of a keyframe's
+   keypoints stands for it; here a view that adds under 30 % of its footprint is all but a repeat.
+
+Every number is a parameter of :class:`MapAwareParams`; the defaults are chosen by the reasoning given
+beside them, not fitted to a tank. Pure numpy and scipy: it runs on a real robot's landmarks as well.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from maptidal.discovery import DiscoveryParams, validate_viewpoints
+from maptidal.geometry import frustum_masks
+
+__all__ = [
+    "MapAwareParams",
+    "MapAwareResult",
+    "RobotMap",
+    "discover_on_map",
+    "fit_planes",
+    "near_teammates",
+    "reachable_on_map",
+    "voxel_keys",
+]
+
+
+@dataclass(frozen=True)
+class MapAwareParams:
+    """The map-aware rules' settings (module docstring). Lengths in metres."""
+
+    # The stereo noise sets these. The loop's 320 px images with the OAK-D's 78.5 deg field of view have
+    # f = 160 / tan(39.25 deg) = 196 px; with its 7.5 cm baseline and 0.25 px disparity noise
+    # (FusionParams) one observation's depth error is z^2 0.25 / (196 x 0.075) = 3.8 cm at 1.5 m and
+    # 6.8 cm at 2 m (maptidal.perception.landmarks).
+    # - the plane fit's support: a ball of 0.5 m, whose in-plane spread (r^2 / 4 = 0.0625 m^2 per axis on
+    #   a disc) makes a flat wall's surface variation 0.0015 / 0.127 = 0.011 at 1.5 m and 0.036 at 2 m,
+    #   while a right-angle crease split between its two planes gives about 0.1 at any size (a 0.3 m ball
+    #   would give a flat wall 0.09 at 2 m: no longer told from a crease)
+    support_radius_m: float = 0.5
+    min_support: int = 8
+    max_surface_variation: float = 0.05
+    # a face's vertices and centroid within 2.5 sigma of one observation's depth noise at 1.5 m
+    plane_tolerance_m: float = 0.1
+    # space carving: a voxel near the vehicle's half-length (BlueROV2 Heavy, 0.457 m long); rays stop this
+    # far short of the landmark they end on, so that the surface's own voxel is not called free
+    voxel_m: float = 0.15
+    ray_stop_m: float = 0.15
+    # how close a viewpoint may come to a mapped surface or the water surface: the loop's reach margin
+    clearance_m: float = 0.35
+    # a landmark this close to the line of sight blocks it, but for its last stretch at the face
+    line_of_sight_radius_m: float = 0.05
+    line_of_sight_end_m: float = 0.2
+    # rule 5's cover
+    coverage_voxel_m: float = 0.1
+    min_new_fraction: float = 0.3
+    min_new_points: int = 8
+    # the water surface's height in the world frame, from the depth sensor's datum (None: not checked)
+    surface_z: float | None = None
+    # a teammate is not structure: landmarks and faces within this of where its last message put it are
+    # left out, the radius growing by ``teammate_speed_m_s`` for each second the message is old. 0.39 m
+    # is half the BlueROV2 Heavy's diagonal (0.457 x 0.575 x 0.254 m, Blue Robotics' technical details);
+    # 0.25 m/s is the loop's cruise speed (MissionParams.speed_m_s). The growth stops at
+    # ``teammate_max_radius_m`` (our choice): a message ten seconds old would otherwise blank 2.9 m of the
+    # map, and the teammate, once it has moved on, shows only as a few faces in the water
+    teammate_radius_m: float = 0.39
+    teammate_speed_m_s: float = 0.25
+    teammate_max_radius_m: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in (
+            "support_radius_m",
+            "max_surface_variation",
+            "plane_tolerance_m",
+            "voxel_m",
+            "coverage_voxel_m",
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"map-aware {name} must be a positive number, got {value!r}")
+        for name in (
+            "ray_stop_m",
+            "clearance_m",
+            "line_of_sight_radius_m",
+            "line_of_sight_end_m",
+            "teammate_radius_m",
+            "teammate_speed_m_s",
+            "teammate_max_radius_m",
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"map-aware {name} must be a non-negative number, got {value!r}")
+        if not 0.0 <= self.min_new_fraction <= 1.0:
+            raise ValueError(f"map-aware min_new_fraction must be in [0, 1], got {self.min_new_fraction!r}")
+        if self.min_support < 3 or self.min_new_points < 1:
+            raise ValueError("map-aware min_support must be at least 3 and min_new_points at least 1")
+        if self.surface_z is not None and not math.isfinite(self.surface_z):
+            raise ValueError(f"map-aware surface_z must be finite or None, got {self.surface_z!r}")
+
+
+def voxel_keys(points: np.ndarray, size: float) -> np.ndarray:
+    """Integer voxel coordinates ``(N, 3)`` of ``points`` on a grid of ``size`` m."""
+    return np.floor(np.asarray(points, float).reshape(-1, 3) / size).astype(np.int64)
+
+
+def _packed(keys: np.ndarray) -> np.ndarray:
+    # one int64 per voxel (21 bits an axis, +-1M voxels): set operations on a 1-D array
+    shifted = keys + (1 << 20)
+    return (shifted[:, 0] << 42) | (shifted[:, 1] << 21) | shifted[:, 2]
+
+
+def fit_planes(
+    map_points: np.ndarray, centres: np.ndarray, radius: float, min_support: int, tree: cKDTree | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The least-squares plane of the ``map_points`` within ``radius`` of each of ``centres`` ``(M, 3)``.
+
+    Returns each fit's centroid ``(M, 3)``, unit normal ``(M, 3)`` (the smallest principal axis, sign
+    arbitrary), surface variation ``(M,)`` and support count ``(M,)``. A centre with fewer than
+    ``min_support`` points has NaN centroid, normal and variation."""
+    map_points = np.asarray(map_points, float).reshape(-1, 3)
+    centres = np.asarray(centres, float).reshape(-1, 3)
+    out_centroid = np.full((len(centres), 3), np.nan)
+    out_normal = np.full((len(centres), 3), np.nan)
+    out_variation = np.full(len(centres), np.nan)
+    support = np.zeros(len(centres), int)
+    if len(map_points) == 0 or len(centres) == 0:
+        return out_centroid, out_normal, out_variation, support
+    tree = tree or cKDTree(map_points)
+    for row, neighbours in enumerate(tree.query_ball_point(centres, radius)):
+        support[row] = len(neighbours)
+        if len(neighbours) < min_support:
+            continue
+        local = map_points[neighbours]
+        centroid = local.mean(axis=0)
+        values, vectors = np.linalg.eigh(np.cov((local - centroid).T, bias=True))
+        total = float(values.sum())
+        out_centroid[row] = centroid
+        out_normal[row] = vectors[:, 0]
+        out_variation[row] = max(float(values[0]), 0.0) / total if total > 0 else np.nan
+    return out_centroid, out_normal, out_variation, support
+
+
+def near_teammates(points: np.ndarray, teammates: np.ndarray | None, params: MapAwareParams) -> np.ndarray:
+    """Which ``points`` ``(N, 3)`` lie on or about a teammate: ``teammates`` rows ``(x, y, z, age_s)`` are
+    where each teammate's last message put it and how old that message is."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    near = np.zeros(len(points), bool)
+    if teammates is None:
+        return near
+    for x, y, z, age in np.asarray(teammates, float).reshape(-1, 4):
+        grown = params.teammate_radius_m + params.teammate_speed_m_s * max(age, 0.0)
+        radius = min(grown, max(params.teammate_max_radius_m, params.teammate_radius_m))
+        near |= np.linalg.norm(points - [x, y, z], axis=1) <= radius
+    return near
+
+
+@dataclass
+class RobotMap:
+    """One robot's own map: fused landmarks by id, and the voxels its cameras have seen through.
+
+    :meth:`add_keyframe` folds in a keyframe: the fused positions of every landmark the front end holds
+    (they move as observations accumulate) and the rays from the camera to the landmarks it saw there."""
+
+    params: MapAwareParams = field(default_factory=MapAwareParams)
+    landmarks: dict[int, np.ndarray] = field(default_factory=dict)
+    free_voxels: set[int] = field(default_factory=set)
+    keyframes: int = 0
+
+    def add_keyframe(
+        self,
+        camera_position: np.ndarray,
+        seen_ids: np.ndarray,
+        seen_points: np.ndarray,
+        fused_ids: np.ndarray | None = None,
+        fused_points: np.ndarray | None = None,
+        teammates: np.ndarray | None = None,
+    ) -> None:
+        """Carve the rays from ``camera_position`` to ``seen_points`` ``(N, 3)`` (landmarks ``seen_ids``
+        seen at this keyframe) and store their positions; ``fused_ids`` / ``fused_points`` update any
+        landmark's fused position (default: the seen ones). Rows with NaNs are skipped, and so are the
+        landmarks on a teammate (``teammates``: :func:`near_teammates`), which is no structure."""
+        camera = np.asarray(camera_position, float).reshape(3)
+        if not np.all(np.isfinite(camera)):
+            return  # a lost pose carves nothing rather than carving the wrong water
+        seen_points = np.asarray(seen_points, float).reshape(-1, 3)
+        seen_ids = np.asarray(seen_ids, int).reshape(-1)
+        finite = np.isfinite(seen_points).all(axis=1)
+        self._carve(camera, seen_points[finite])
+        ids = seen_ids if fused_ids is None else np.asarray(fused_ids, int).reshape(-1)
+        points = seen_points if fused_points is None else np.asarray(fused_points, float).reshape(-1, 3)
+        on_teammate = near_teammates(points, teammates, self.params)
+        for landmark, point, skip in zip(ids.tolist(), points, on_teammate.tolist(), strict=True):
+            if np.all(np.isfinite(point)) and not skip:
+                self.landmarks[landmark] = point.copy()
+        self.keyframes += 1
+
+    def _carve(self, camera: np.ndarray, targets: np.ndarray) -> None:
+        if len(targets) == 0:
+            return
+        offsets = targets - camera
+        lengths = np.linalg.norm(offsets, axis=1)
+        step = 0.5 * self.params.voxel_m  # half a voxel: no voxel a ray crosses is skipped by much
+        reach = np.maximum(lengths - self.params.ray_stop_m, 0.0)
+        count = int(np.ceil(reach.max() / step)) + 1
+        fractions = np.arange(count) * step
+        samples = fractions[None, :] <= reach[:, None]
+        directions = offsets / np.maximum(lengths, 1e-9)[:, None]
+        points = camera + fractions[None, :, None] * directions[:, None, :]
+        keys = _packed(voxel_keys(points[samples], self.params.voxel_m))
+        self.free_voxels.update(np.unique(keys).tolist())
+
+    def carve_view(
+        self,
+        camera_position: np.ndarray,
+        rotation: np.ndarray,
+        intrinsics,
+        mesh_vertices: np.ndarray,
+        mesh_faces: np.ndarray,
+        cell_px: int = 8,
+    ) -> int:
+        """Carve the water a camera saw through to its keyframe mesh: every voxel in its view whose pixel
+        falls on a mesh face and that lies nearer than the face (less ``ray_stop_m``). ``rotation`` is the
+        camera's optical frame in the world (columns: right, down, forward); ``intrinsics`` has ``fx``,
+        ``fy``, ``cx``, ``cy``, ``width`` and ``height``. The mesh is drawn into a depth image of
+        ``cell_px`` pixel cells, each face at its nearest vertex's depth (so a face never claims water
+        beyond itself), the nearest face winning. Returns how many voxels were carved."""
+        import cv2  # only here: the rest of the map needs numpy and scipy alone
+
+        camera = np.asarray(camera_position, float).reshape(3)
+        rotation = np.asarray(rotation, float).reshape(3, 3)
+        vertices = np.asarray(mesh_vertices, float).reshape(-1, 3)
+        faces = np.asarray(mesh_faces, int).reshape(-1, 3)
+        if len(faces) == 0 or not (np.all(np.isfinite(camera)) and np.all(np.isfinite(rotation))):
+            return 0
+        local = (vertices - camera) @ rotation  # optical frame: x right, y down, z forward
+        depth = local[:, 2]
+        usable = np.isfinite(local).all(axis=1) & (depth > 1e-3)
+        faces = faces[usable[faces].all(axis=1)]
+        if len(faces) == 0:
+            return 0
+        k = intrinsics
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = k.fx * local[:, 0] / depth + k.cx
+            v = k.fy * local[:, 1] / depth + k.cy
+        cells_w, cells_h = int(np.ceil(k.width / cell_px)), int(np.ceil(k.height / cell_px))
+        image = np.zeros((cells_h, cells_w), np.float32)  # 0: no face seen there
+        face_depth = depth[faces].min(axis=1)
+        for row in np.argsort(-face_depth):  # far to near: the nearest face wins a cell
+            # cell i spans pixels [8i, 8i + 8) and OpenCV puts its centre at i: hence the half cell;
+            # corners to 1/16 of a cell (shift 4), so that a cell is filled when its centre is inside
+            corners = np.column_stack([u[faces[row]], v[faces[row]]]) / cell_px - 0.5
+            fixed = np.round(corners * 16).astype(np.int32)
+            cv2.fillConvexPoly(image, fixed, float(face_depth[row]), lineType=cv2.LINE_8, shift=4)
+        # a cell on the mesh's rim is only partly covered: a 3 x 3 minimum (erosion) leaves it unknown, and
+        # gives every cell the nearest depth about it, so that no voxel is carved beyond the mesh
+        image = cv2.erode(image, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
+        # the voxels of the view's bounding box, tested against the depth image
+        far = float(face_depth.max())
+        corners = np.array(
+            [
+                [x, y, 1.0]
+                for x in (-k.cx / k.fx, (k.width - k.cx) / k.fx)
+                for y in (-k.cy / k.fy, (k.height - k.cy) / k.fy)
+            ]
+        )
+        box = np.vstack([camera, camera + far * corners @ rotation.T])
+        size = self.params.voxel_m
+        low, high = np.floor(box.min(axis=0) / size), np.floor(box.max(axis=0) / size)
+        axes = [np.arange(a, b + 1) for a, b in zip(low, high, strict=True)]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        centres = (grid + 0.5) * size
+        inside = (centres - camera) @ rotation
+        z = inside[:, 2]
+        ahead = z > 1e-3
+        column = np.full(len(z), -1)
+        line = np.full(len(z), -1)
+        column[ahead] = np.floor((k.fx * inside[ahead, 0] / z[ahead] + k.cx) / cell_px).astype(int)
+        line[ahead] = np.floor((k.fy * inside[ahead, 1] / z[ahead] + k.cy) / cell_px).astype(int)
+        in_view = ahead & (column >= 0) & (column < cells_w) & (line >= 0) & (line < cells_h)
+        surface = np.zeros(len(z), np.float32)
+        surface[in_view] = image[line[in_view], column[in_view]]
+        free = in_view & (surface > 0) & (z < surface - self.params.ray_stop_m)
+        self.free_voxels.update(_packed(grid[free].astype(np.int64)).tolist())
+        return int(free.sum())
+
+    def points(self) -> np.ndarray:
+        """Every landmark's position ``(N, 3)``."""
+        if not self.landmarks:
+            return np.zeros((0, 3))
+        return np.stack(list(self.landmarks.values()))
+
+    def seen_free(self, positions: np.ndarray) -> np.ndarray:
+        """Whether each position's voxel was crossed by a ray of the robot's cameras."""
+        keys = _packed(voxel_keys(positions, self.params.voxel_m))
+        return np.array([key in self.free_voxels for key in keys.tolist()], bool)
+
+
+@dataclass
+class MapAwareResult:
+    """What one keyframe gave, and how many candidates each rule removed, in the order they apply."""
+
+    final: np.ndarray
+    candidates: int
+    no_support: int
+    not_planar: int
+    bridging: int
+    not_free: int
+    redundant: int
+
+    def counts(self) -> dict[str, int]:
+        """The candidate counts by rule, for logs and reports."""
+        return {
+            "candidates": self.candidates,
+            "no_support": self.no_support,
+            "not_planar": self.not_planar,
+            "bridging": self.bridging,
+            "not_free": self.not_free,
+            "redundant": self.redundant,
+            "final": len(self.final),
+        }
+
+
+def reachable_on_map(
+    robot_map: RobotMap, rows: np.ndarray, standoff: float, tree: cKDTree | None = None
+) -> np.ndarray:
+    """Rule 4: which viewpoint rows ``(N, 6)`` lie in water the robot has seen, clear of its map and of
+    the surface, with no landmark on the line of sight to the face ``standoff`` ahead."""
+    params = robot_map.params
+    rows = np.asarray(rows, float).reshape(-1, 6)
+    if len(rows) == 0:
+        return np.zeros(0, bool)
+    ok = robot_map.seen_free(rows[:, :3])
+    if params.surface_z is not None:
+        ok &= rows[:, 2] <= params.surface_z - params.clearance_m
+    points = robot_map.points()
+    if len(points) == 0:
+        return ok
+    tree = tree or cKDTree(points)
+    if params.clearance_m > 0:
+        nearest, _ = tree.query(rows[:, :3], k=1)
+        ok &= nearest >= params.clearance_m
+    sight = max(standoff - params.line_of_sight_end_m, 0.0)
+    if params.line_of_sight_radius_m > 0 and sight > 0:
+        spacing = params.line_of_sight_radius_m
+        steps = np.arange(0.0, sight + 1e-9, spacing)
+        for row in np.flatnonzero(ok):
+            samples = rows[row, :3] + steps[:, None] * rows[row, 3:]
+            hits = tree.query_ball_point(samples, params.line_of_sight_radius_m, return_length=True)
+            ok[row] = not np.any(hits)
+    return ok
+
+
+def _covered(rows: np.ndarray, cells: np.ndarray, camera) -> np.ndarray:
+    # which coverage cells any of ``rows`` sees
+    seen = np.zeros(len(cells), bool)
+    for mask in frustum_masks(rows, cells, camera):
+        seen |= mask
+    return seen
+
+
+def discover_on_map(
+    robot_map: RobotMap,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    camera_position: np.ndarray,
+    existing: np.ndarray | None = None,
+    discovery: DiscoveryParams | None = None,
+    teammates: np.ndarray | None = None,
+) -> MapAwareResult:
+    """Map-aware discovery (module docstring) on a keyframe mesh ``vertices`` ``(V, 3)``, ``faces``
+    ``(F, 3)``, seen from ``camera_position``, with the ``existing`` task rows ``(N, 6)`` the robot knows.
+    ``robot_map`` must already hold this keyframe (:meth:`RobotMap.add_keyframe`). The candidate standoff
+    and the view's frustum are ``discovery``'s (the paper's ``L_i`` and the OAK-D's field of view). Faces
+    on a teammate (``teammates``, :func:`near_teammates`) count as having no support."""
+    params = robot_map.params
+    discovery = discovery or DiscoveryParams()
+    existing_rows = validate_viewpoints([] if existing is None else existing, "existing tasks")
+    vertices = np.asarray(vertices, float).reshape(-1, 3)
+    faces = np.asarray(faces, int).reshape(-1, 3)
+    empty = MapAwareResult(np.zeros((0, 6)), 0, 0, 0, 0, 0, 0)
+    if len(faces) == 0:
+        return empty
+    triangles = vertices[faces]
+    good = np.isfinite(triangles).all(axis=(1, 2))
+    triangles = triangles[good]
+    centres = triangles.mean(axis=1)
+    candidates = len(triangles)
+    points = robot_map.points()
+    if len(points) == 0 or candidates == 0:
+        return MapAwareResult(np.zeros((0, 6)), candidates, candidates, 0, 0, 0, 0)
+    tree = cKDTree(points)
+    # rule 2: the local plane at each face
+    fit_centre, normal, variation, _ = fit_planes(
+        points, centres, params.support_radius_m, params.min_support, tree
+    )
+    supported = np.isfinite(variation) & ~near_teammates(centres, teammates, params)
+    # rule 3: planar, and the face on the plane
+    planar = supported & (variation <= params.max_surface_variation)
+    on_plane = np.zeros(len(triangles), bool)
+    rows_planar = np.flatnonzero(planar)
+    if len(rows_planar):
+        corners = np.concatenate([triangles[rows_planar], centres[rows_planar, None]], axis=1)
+        offsets = np.einsum("nkj,nj->nk", corners - fit_centre[rows_planar, None], normal[rows_planar])
+        on_plane[rows_planar] = np.abs(offsets).max(axis=1) <= params.plane_tolerance_m
+    # the normal faces the camera that saw the face
+    towards = np.asarray(camera_position, float).reshape(3) - centres
+    flip = np.einsum("ij,ij->i", normal, towards) < 0
+    normal[flip] *= -1.0
+    # the candidate looks at the face's centroid projected onto its plane, from standoff along the normal
+    surface = centres - np.einsum("ij,ij->i", centres - fit_centre, normal)[:, None] * normal
+    kept = np.flatnonzero(on_plane)
+    rows = np.hstack([surface[kept] + discovery.standoff * normal[kept], -normal[kept]])
+    # rule 4: in water the robot has seen
+    free = reachable_on_map(robot_map, rows, discovery.standoff, tree)
+    rows = rows[free]
+    # rule 5: a greedy cover of the map's cells, the known tasks' views counting as covered
+    redundant_before = len(rows)
+    final = np.zeros((0, 6))
+    if len(rows):
+        cells = np.unique(voxel_keys(points, params.coverage_voxel_m), axis=0)
+        cells = (cells + 0.5) * params.coverage_voxel_m
+        camera = discovery.camera
+        covered = _covered(existing_rows, cells, camera) if len(existing_rows) else np.zeros(len(cells), bool)
+        sees = np.stack(list(frustum_masks(rows, cells, camera)))
+        footprint = sees.sum(axis=1)
+        chosen: list[int] = []
+        while True:
+            new = (sees & ~covered).sum(axis=1)
+            fraction = np.where(footprint > 0, new / np.maximum(footprint, 1), 0.0)
+            eligible = (new >= params.min_new_points) & (fraction >= params.min_new_fraction)
+            if not eligible.any():
+                break
+            best = int(np.argmax(np.where(eligible, new, -1)))
+            chosen.append(best)
+            covered |= sees[best]
+        final = rows[chosen]
+    return MapAwareResult(
+        final=final,
+        candidates=candidates,
+        no_support=int((~supported).sum()),
+        not_planar=int((supported & ~planar).sum()),
+        bridging=int((planar & ~on_plane).sum()),
+        not_free=int((~free).sum()),
+        redundant=redundant_before - len(final),
+    )

@@ -1,0 +1,354 @@
+"""Map-aware discovery's rules (maptidal.map_discovery), each against a scene built by hand: walls and a
+floor as planes with stereo-sized noise, normals written down, cameras placed where a robot would be. The
+references share nothing with the module but numpy: a normal is the plane's written normal, a free voxel is
+one a ray written out here crosses, a covered point is one a frustum tested point by point sees."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from maptidal.discovery import DiscoveryParams
+from maptidal.map_discovery import (
+    MapAwareParams,
+    RobotMap,
+    discover_on_map,
+    fit_planes,
+    near_teammates,
+    reachable_on_map,
+)
+
+NOISE_M = 0.01  # fused landmarks' noise about a wall 1.5 m away (tests below stay far from the gates)
+
+
+def _plane_points(origin, u, v, size_u, size_v, spacing, rng, noise=NOISE_M):
+    """Points on the rectangle ``origin + s u + t v`` (s in [0, size_u], t in [0, size_v]), jittered along
+    the normal ``u x v`` by ``noise``."""
+    origin, u, v = (np.asarray(a, float) for a in (origin, u, v))
+    normal = np.cross(u, v)
+    s, t = np.meshgrid(np.arange(0, size_u + 1e-9, spacing), np.arange(0, size_v + 1e-9, spacing))
+    points = origin + s.reshape(-1, 1) * u + t.reshape(-1, 1) * v
+    return points + rng.normal(0, noise, (len(points), 1)) * normal
+
+
+def _wall_scene(rng):
+    """A wall at x = 3 (facing -x, 4 m wide, 2 m high) and a floor at z = 0, seen by a camera at
+    (1, 2, 1): the landmarks, their ids, and the camera."""
+    wall = _plane_points([3, 0, 0], [0, 1, 0], [0, 0, 1], 4.0, 2.0, 0.1, rng)
+    floor = _plane_points([1.2, 0, 0], [1, 0, 0], [0, 1, 0], 1.8, 4.0, 0.1, rng)
+    points = np.vstack([wall, floor])
+    return points, np.arange(len(points)), np.array([1.0, 2.0, 1.0])
+
+
+def _map_of(points, ids, camera, params=None) -> RobotMap:
+    robot_map = RobotMap(params or MapAwareParams())
+    robot_map.add_keyframe(camera, ids, points)
+    return robot_map
+
+
+def _face_at(points, centre, radius=0.12):
+    """Three landmarks around ``centre``, as the mesher would join them."""
+    distance = np.linalg.norm(points - centre, axis=1)
+    order = np.argsort(distance)
+    return order[:3]
+
+
+# ----- rule 2: normals from local fits -----------------------------------------------------------------
+
+
+def test_a_plane_fit_recovers_the_written_normal_and_is_flat():
+    rng = np.random.default_rng(0)
+    normal = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
+    u = np.cross(normal, [0, 0, 1.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    points = _plane_points([0, 0, 0], u, v, 1.0, 1.0, 0.05, rng)
+    _, fitted, variation, support = fit_planes(points, [[0.5 * (u + v)]], 0.3, 8)
+    assert support[0] >= 30
+    assert math.degrees(math.acos(min(1.0, abs(float(fitted[0] @ normal))))) < 3.0
+    assert variation[0] < 0.01
+
+
+def test_a_crease_between_two_planes_is_not_flat():
+    rng = np.random.default_rng(1)
+    wall = _plane_points([0, 0, 0], [0, 1, 0], [0, 0, 1], 1.0, 1.0, 0.05, rng)
+    floor = _plane_points([0, 0, 0], [0, 1, 0], [-1, 0, 0], 1.0, 1.0, 0.05, rng)
+    points = np.vstack([wall, floor])
+    _, _, variation, _ = fit_planes(points, [[0.0, 0.5, 0.0]], 0.3, 8)
+    # half on each plane: the smallest axis carries a quarter of the spread, about 0.1 (module docstring)
+    assert variation[0] > MapAwareParams().max_surface_variation
+
+
+def test_too_few_points_give_no_fit():
+    _, normal, variation, support = fit_planes(np.eye(3), [[0, 0, 0]], 2.0, 8)
+    assert support[0] == 3 and np.isnan(normal).all() and np.isnan(variation[0])
+
+
+def test_a_candidate_looks_along_the_fitted_normal_not_its_tilted_face():
+    rng = np.random.default_rng(2)
+    points, ids, camera = _wall_scene(rng)
+    robot_map = _map_of(points, ids, camera)
+    # a face on the wall whose own vertices are displaced so that its normal tilts about 25 degrees
+    vertices = np.array([[3.0, 1.9, 1.0], [2.95, 2.1, 1.0], [3.05, 2.0, 1.2]])
+    own = np.cross(vertices[1] - vertices[0], vertices[2] - vertices[0])
+    own /= np.linalg.norm(own)
+    assert math.degrees(math.acos(abs(own @ [-1, 0, 0]))) > 20
+    params = MapAwareParams(plane_tolerance_m=0.1)
+    robot_map.params = params
+    result = discover_on_map(robot_map, vertices, [[0, 1, 2]], camera)
+    assert len(result.final) == 1
+    assert np.allclose(result.final[0, 3:], [1, 0, 0], atol=0.05)  # looks at the wall along +x
+    assert abs(result.final[0, 0] - 2.0) < 0.05  # standoff 1 m in front of the wall at x = 3
+
+
+# ----- rule 3: no candidates on bridging faces ---------------------------------------------------------
+
+
+def test_a_face_bridging_the_wall_and_the_floor_yields_no_candidate():
+    rng = np.random.default_rng(3)
+    points, ids, camera = _wall_scene(rng)
+    robot_map = _map_of(points, ids, camera)
+    wall_face = points[_face_at(points, [3.0, 2.0, 1.0])]
+    # a face with two corners on the wall, low down, and one on the floor 0.8 m out: its centroid hangs in
+    # the water, off both planes
+    bridge = np.array([[3.0, 2.0, 0.4], [3.0, 2.2, 0.4], [2.2, 2.1, 0.0]])
+    vertices = np.vstack([wall_face, bridge])
+    result = discover_on_map(robot_map, vertices, [[0, 1, 2], [3, 4, 5]], camera)
+    assert result.bridging + result.no_support + result.not_planar == 1
+    assert len(result.final) == 1
+    assert result.final[0, 0] == pytest.approx(2.0, abs=0.05)
+
+
+def test_a_face_across_a_near_and_a_far_wall_is_off_the_plane():
+    rng = np.random.default_rng(4)
+    near = _plane_points([2.0, 0, 0], [0, 1, 0], [0, 0, 1], 1.5, 2.0, 0.1, rng)  # y in [0, 1.5]
+    far = _plane_points([3.0, 1.5, 0], [0, 1, 0], [0, 0, 1], 2.5, 2.0, 0.1, rng)  # y in [1.5, 4]
+    points = np.vstack([near, far])
+    camera = np.array([0.5, 2.0, 1.0])
+    robot_map = _map_of(points, np.arange(len(points)), camera)
+    # two corners on the near wall's edge, one on the far wall: the face spans the step between them
+    vertices = np.array([[2.0, 1.45, 1.0], [2.0, 1.45, 1.2], [3.0, 1.7, 1.1]])
+    result = discover_on_map(robot_map, vertices, [[0, 1, 2]], camera)
+    assert len(result.final) == 0
+    assert result.bridging + result.not_planar + result.no_support == 1
+
+
+def test_a_small_face_in_the_crease_is_refused_as_not_planar():
+    rng = np.random.default_rng(10)
+    points, ids, camera = _wall_scene(rng)
+    robot_map = _map_of(points, ids, camera)
+    # a face hugging the line where the wall meets the floor: it lies close to the fitted (diagonal)
+    # plane, so only the planarity test tells that its support spans two surfaces
+    vertices = np.array([[2.97, 2.0, 0.03], [2.99, 2.1, 0.01], [2.96, 2.05, 0.0]])
+    result = discover_on_map(robot_map, vertices, [[0, 1, 2]], camera)
+    assert result.not_planar == 1 and len(result.final) == 0
+
+
+# ----- rule 4: free space from the robot's own map -----------------------------------------------------
+
+
+def _ray_crosses(camera, targets, position, voxel, stop):
+    """Exact, by the slab method (Kay and Kajiya 1986): does a ray from ``camera`` towards any target,
+    stopping ``stop`` short of it, pass through the voxel holding ``position``?"""
+    low = np.floor(np.asarray(position) / voxel) * voxel
+    high = low + voxel
+    offsets = targets - camera
+    lengths = np.linalg.norm(offsets, axis=1)
+    directions = offsets / lengths[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_low = (low - camera) / directions
+        t_high = (high - camera) / directions
+    enter = np.nanmax(np.minimum(t_low, t_high), axis=1)
+    leave = np.nanmin(np.maximum(t_low, t_high), axis=1)
+    return bool(np.any((enter <= leave) & (leave >= 0.0) & (enter <= lengths - stop)))
+
+
+def test_seen_water_is_what_the_cameras_rays_crossed():
+    rng = np.random.default_rng(5)
+    points, ids, camera = _wall_scene(rng)
+    params = MapAwareParams()
+    robot_map = _map_of(points, ids, camera, params)
+    probes = rng.uniform([0.5, -0.5, -0.5], [3.5, 4.5, 2.5], (300, 3))
+    brute = np.array([_ray_crosses(camera, points, p, params.voxel_m, params.ray_stop_m) for p in probes])
+    assert brute.sum() > 20 and (~brute).sum() > 20
+    # sampling every half voxel can miss a corner a ray only grazes: allow a few such voxels
+    assert np.mean(robot_map.seen_free(probes) == brute) > 0.97
+    assert not robot_map.seen_free(probes[~brute]).sum() > 0.05 * (~brute).sum()
+
+
+def test_viewpoints_behind_a_wall_under_the_floor_or_at_the_surface_are_refused():
+    rng = np.random.default_rng(6)
+    points, ids, camera = _wall_scene(rng)
+    robot_map = _map_of(points, ids, camera, MapAwareParams(surface_z=2.0))
+    rows = np.array(
+        [
+            [2.0, 2.0, 1.0, 1, 0, 0],  # in front of the wall, looking at it: fine
+            [4.0, 2.0, 1.0, -1, 0, 0],  # behind the wall, looking back through it
+            [2.0, 2.0, -0.6, 0, 0, 1],  # under the floor
+            [1.5, 2.0, 1.9, 1, 0, 0],  # 10 cm under the surface
+            [2.8, 2.0, 1.0, 1, 0, 0],  # 20 cm from the wall
+        ]
+    )
+    assert reachable_on_map(robot_map, rows, 1.0).tolist() == [True, False, False, False, False]
+
+
+def test_a_landmark_on_the_line_of_sight_blocks_the_view():
+    rng = np.random.default_rng(7)
+    points, _, camera = _wall_scene(rng)
+    pillar = np.column_stack([np.full(21, 2.5), np.full(21, 2.0), np.linspace(0.5, 1.5, 21)])
+    everything = np.vstack([points, pillar])
+    robot_map = _map_of(everything, np.arange(len(everything)), camera)
+    rows = np.array([[2.0, 2.0, 1.0, 1, 0, 0], [2.0, 3.0, 1.0, 1, 0, 0]])
+    # the pillar at x = 2.5 stands between the first viewpoint and the wall, not the second
+    ok = reachable_on_map(robot_map, rows, 1.0)
+    assert ok.tolist() == [False, True]
+
+
+def test_the_tank_model_is_never_read():
+    # what the module imports (read from its syntax tree): numpy, scipy and the paper's own modules; no
+    # tank, scenario, free-space check or simulator
+    import ast
+
+    import maptidal.map_discovery as module
+
+    tree = ast.parse(Path(module.__file__).read_text())
+    imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+    imported |= {
+        alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names
+    }
+    assert imported <= {
+        "__future__",
+        "math",
+        "dataclasses",
+        "numpy",
+        "scipy.spatial",
+        "cv2",
+        "maptidal.discovery",
+        "maptidal.geometry",
+    }, imported
+
+
+# ----- rule 5: views that add little -------------------------------------------------------------------
+
+
+def _sees(viewpoint, points, discovery):
+    """Brute force: the points inside one view's frustum, from the field of view written out."""
+    position, direction = viewpoint[:3], viewpoint[3:]
+    up = np.array([0.0, 0.0, 1.0])
+    right = np.cross(direction, up)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, direction)
+    rel = points - position
+    depth = rel @ direction
+    x, y = rel @ right, rel @ true_up
+    tan_h = math.tan(math.radians(discovery.hfov_deg / 2))
+    tan_v = math.tan(math.radians(discovery.vfov_deg / 2))
+    return (
+        (depth >= 0)
+        & (depth <= discovery.far_range)
+        & (np.abs(x) <= depth * tan_h + 1e-9)
+        & (np.abs(y) <= depth * tan_v + 1e-9)
+    )
+
+
+def test_a_view_the_known_tasks_already_cover_is_dropped_and_a_new_one_kept():
+    rng = np.random.default_rng(8)
+    points, ids, camera = _wall_scene(rng)
+    robot_map = _map_of(points, ids, camera)
+    discovery = DiscoveryParams()
+    # faces at y = 1 and y = 3 on the wall; a known task already looks at y = 1
+    face_one = _face_at(points, [3.0, 1.0, 1.0])
+    face_three = _face_at(points, [3.0, 3.0, 1.0])
+    vertices = np.vstack([points[face_one], points[face_three]])
+    known = np.array([[2.0, 1.0, 1.0, 1.0, 0.0, 0.0]])
+    result = discover_on_map(robot_map, vertices, [[0, 1, 2], [3, 4, 5]], camera, existing=known)
+    assert len(result.final) == 1 and result.redundant == 1
+    assert result.final[0, 1] == pytest.approx(3.0, abs=0.1)
+    # the brute-force reason: the dropped view adds under 30 % of its footprint to the known one's
+    cells = (np.unique(np.floor(points / 0.1), axis=0) + 0.5) * 0.1
+    first = np.array([2.0, 1.0, 1.0, 1, 0, 0])
+    again = _sees(first, cells, discovery) & ~_sees(known[0], cells, discovery)
+    assert again.sum() < 0.3 * _sees(first, cells, discovery).sum()
+
+
+def test_two_candidates_on_one_patch_give_one_task():
+    rng = np.random.default_rng(9)
+    points, ids, camera = _wall_scene(rng)
+    robot_map = _map_of(points, ids, camera)
+    faces_at = [_face_at(points, [3.0, y, 1.0]) for y in (2.0, 2.1)]
+    vertices = np.vstack([points[f] for f in faces_at])
+    result = discover_on_map(robot_map, vertices, [[0, 1, 2], [3, 4, 5]], camera)
+    assert len(result.final) == 1 and result.redundant == 1
+
+
+def test_bad_parameters_are_refused():
+    with pytest.raises(ValueError, match="support_radius_m"):
+        MapAwareParams(support_radius_m=0.0)
+    with pytest.raises(ValueError, match="min_new_fraction"):
+        MapAwareParams(min_new_fraction=1.5)
+    with pytest.raises(ValueError, match="surface_z"):
+        MapAwareParams(surface_z=float("nan"))
+
+
+def test_a_lost_pose_or_nan_landmarks_carve_nothing_and_are_skipped():
+    robot_map = RobotMap()
+    robot_map.add_keyframe([np.nan, 0, 0], [1], [[1.0, 0, 0]])
+    assert not robot_map.free_voxels and not robot_map.landmarks
+    robot_map.add_keyframe([0, 0, 0], [1, 2], [[1.0, 0, 0], [np.nan, 0, 0]])
+    assert list(robot_map.landmarks) == [1] and robot_map.free_voxels
+
+
+def test_a_teammate_in_view_is_no_structure():
+    rng = np.random.default_rng(11)
+    points, _, camera = _wall_scene(rng)
+    # a teammate's hull, a 0.5 m box of landmarks at (2, 1, 1), in the camera's view
+    hull = rng.uniform([1.75, 0.75, 0.85], [2.25, 1.25, 1.15], (120, 3))
+    everything = np.vstack([points, hull])
+    heard = np.array([[2.0, 1.0, 1.0, 0.0]])  # its last message, just now
+    robot_map = RobotMap()
+    robot_map.add_keyframe(camera, np.arange(len(everything)), everything, teammates=heard)
+    assert len(robot_map.landmarks) == len(points)  # the hull's landmarks are left out
+    # a face on the hull finds no support, and no task
+    face = hull[np.argsort(np.linalg.norm(hull - [1.75, 1.0, 1.0], axis=1))[:3]]
+    result = discover_on_map(robot_map, face, [[0, 1, 2]], camera, teammates=heard)
+    assert result.no_support == 1 and len(result.final) == 0
+    # a message 2 s old: the teammate may have moved 0.5 m, and the radius grows with it (to the cap)
+    params = MapAwareParams()
+    probe = np.array([[2.0, 1.0 + 0.8, 1.0]])
+    assert not near_teammates(probe, heard, params)[0]
+    assert near_teammates(probe, [[2.0, 1.0, 1.0, 2.0]], params)[0]
+    assert not near_teammates(probe + [0, 0.5, 0], [[2.0, 1.0, 1.0, 60.0]], params)[0]
+
+
+def test_the_water_in_view_before_the_mesh_is_carved_and_none_beyond_it():
+    from types import SimpleNamespace
+
+    # a camera at the origin looking along +x (optical frame: x right = -y world, y down = -z world,
+    # z forward = +x world) at a wall meshed as two triangles at x = 2, 2 m wide and 1.2 m high
+    rotation = np.column_stack([[0, -1, 0], [0, 0, -1], [1, 0, 0]]).astype(float)
+    intrinsics = SimpleNamespace(fx=196.0, fy=196.0, cx=160.0, cy=100.0, width=320, height=200)
+    corners = np.array([[2.0, -1.0, -0.6], [2.0, 1.0, -0.6], [2.0, 1.0, 0.6], [2.0, -1.0, 0.6]])
+    params = MapAwareParams()
+    robot_map = RobotMap(params)
+    carved = robot_map.carve_view([0, 0, 0], rotation, intrinsics, corners, [[0, 1, 2], [0, 2, 3]])
+    assert carved > 50
+    rng = np.random.default_rng(12)
+    probes = rng.uniform([0.2, -1.2, -0.8], [3.0, 1.2, 0.8], (2000, 3))
+    free = robot_map.seen_free(probes)
+    # brute force, from the written geometry: the probe's voxel centre lies in the camera's view, its
+    # ray meets the wall's rectangle, and it is nearer than the wall by the ray's stop (to a voxel's
+    # width, the depth image's cells and its faces drawn at their nearest corner's depth)
+    centres = (np.floor(probes / params.voxel_m) + 0.5) * params.voxel_m
+    x = centres[:, 0]
+    hit = centres[:, 1:] * (2.0 / np.maximum(x, 1e-9))[:, None]  # where the ray meets x = 2
+    in_view = (x > 0) & (np.abs(centres[:, 1] / x) < 160 / 196) & (np.abs(centres[:, 2] / x) < 100 / 196)
+    on_wall = (np.abs(hit[:, 0]) < 1.0) & (np.abs(hit[:, 1]) < 0.6)
+    surely_free = in_view & on_wall & (x < 2.0 - params.ray_stop_m - params.voxel_m)
+    surely_not = ~in_view | ~on_wall | (x > 2.0 - params.ray_stop_m)
+    margin = (np.abs(hit) > [0.85, 0.45]).any(axis=1)  # the edge cells of the depth image
+    assert free[surely_free & ~margin].all()
+    assert not free[surely_not].any()
+    assert free[surely_free].mean() > 0.8
