@@ -7,14 +7,15 @@ mode keeps the paper's idea (a candidate viewpoint ``standoff`` in front of each
 it) and adds five rules, each with its reason:
 
 1. **The robot's own fused map.** :class:`RobotMap` accumulates, keyframe after keyframe, every fused
-   landmark (the front end's information-form fusion, so a landmark seen ten times sits where its ten
-   observations agree) and the free space the camera saw through. Discovery reads that map, not one
-   keyframe's faces alone: one keyframe sees a strip of wall; the map holds the wall.
+   landmark of the keyframe (the front end's information-form fusion, so a landmark seen ten times sits
+   where its ten observations agree) and the water the camera saw through. Discovery reads that map, not
+   one keyframe's faces alone: one keyframe sees a strip of wall; the map holds the wall. A teammate is
+   no structure: landmarks and faces about where its last acoustic message put it are left out.
 2. **Normals from local surface fits.** A face's normal is the smallest principal axis of the map points
    within ``support_radius_m`` of its centroid (the least-squares plane, as in Hoppe et al. 1992,
    "Surface reconstruction from unorganized points"), turned to face the camera that saw the face. One
-   face's normal comes from three noisy landmarks; a plane through a dozen or more is steadier. A centroid
-   with fewer than ``min_support`` points nearby has no fit and yields no candidate.
+   face's normal comes from three noisy landmarks; a plane through dozens is steadier. A centroid with
+   fewer than ``min_support`` points nearby has no fit and yields no candidate.
 3. **No candidates on faces that bridge surfaces.** The fit must be planar: its surface variation
    ``lambda_0 / (lambda_0 + lambda_1 + lambda_2)`` (Pauly et al. 2002, "Efficient simplification of point-
    sampled surfaces") at most ``max_surface_variation``, which a flat patch meets under stereo noise and
@@ -22,10 +23,12 @@ it) and adds five rules, each with its reason:
    vertex and the centroid within ``plane_tolerance_m`` of it. A face spanning a wall and the floor, or a
    near wall and a far one, has its centroid in open water, off every plane.
 4. **Free space from the robot's own map.** A viewpoint is kept only where the robot has seen water:
-   its voxel was crossed by a ray from a camera to a landmark it saw (space carving; nothing behind a
-   wall or under the floor is ever crossed), no landmark lies within ``clearance_m`` of it, it is
-   ``clearance_m`` below the surface (the depth sensor's datum, ``surface_z``), and no landmark lies on
-   its line of sight to the face. No tank model and no simulator truth is read.
+   its voxel lies between one of its cameras and the keyframe mesh that camera saw (space carving:
+   :meth:`RobotMap.carve_view` draws the mesh into a depth image; nothing behind a wall or under the
+   floor is ever carved), no landmark lies within ``clearance_m`` of it, it is ``clearance_m`` below the
+   surface (the depth sensor's datum, ``surface_z``), and no landmark lies on its line of sight to the
+   face. No tank model and no simulator truth is read. Water the robot has not yet seen is not free: a
+   face seen at a grazing angle waits until the robot has seen the water in front of it.
 5. **Views that add little are dropped.** Each candidate sees a set of map points (those in its
    frustum, on a voxel grid of ``coverage_voxel_m``). A greedy cover (the standard greedy algorithm for
    set cover, Chvatal 1979) takes the candidate that sees the most points no view yet covers, the views
@@ -33,6 +36,7 @@ it) and adds five rules, each with its reason:
    covered, until no candidate adds ``min_new_fraction`` of its own view and ``min_new_points`` points.
    The 0.3 mirrors the paper's confirmation threshold: there a view that holds 75 % of a keyframe's
    keypoints stands for it; here a view that adds under 30 % of its footprint is all but a repeat.
+   Occlusion is not modelled in this count.
 
 Every number is a parameter of :class:`MapAwareParams`; the defaults are chosen by the reasoning given
 beside them, not fitted to a tank. Pure numpy and scipy: it runs on a real robot's landmarks as well.
