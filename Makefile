@@ -5,7 +5,9 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.setup-stamp
 RUN_DIR ?= runs/mission
 # the tests run in this many processes (pytest-xdist): the machines have 2 cores, and the suite's heavy
-# missions wait on each other's drawing; TEST_WORKERS=0 runs them in this one process
+# missions wait on each other's drawing; TEST_WORKERS=0 runs them in this one process. Each test module
+# runs whole on one worker (--dist loadscope), so that a module's shared mission (a module-scoped
+# fixture) is flown once, not once per worker that gets one of its tests
 TEST_WORKERS ?= 2
 
 # Headless rendering through EGL works on CPU-only machines (Mesa) and on NVIDIA GPUs.
@@ -33,7 +35,7 @@ run: setup
 	$(BIN)/maptidal run --out $(RUN_DIR)
 
 test: setup
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) $(if $(filter 0,$(TEST_WORKERS)),,--dist loadscope)
 
 # the tests against real ArduSub firmware: ARDUSUB_SITL=/path/to/ardusub make sitl-test (README, SITL)
 sitl-test: setup

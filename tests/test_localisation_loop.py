@@ -83,7 +83,8 @@ MISSIONS = {  # id: (motion model error, relocalisation)
 
 @pytest.fixture(scope="module")
 def missions(tmp_path_factory):
-    """300 s of the default mission (seed 2) for each of MISSIONS, run on first use."""
+    """240 s, its own length, of the default mission (seed 2) for each of MISSIONS, run on first use (the
+    bounds below were first measured over 300 s; 240 s keeps the test suite within its time)."""
     done: dict[str, tuple[dict, object]] = {}
 
     def get(name: str) -> tuple[dict, object]:
@@ -94,11 +95,12 @@ def missions(tmp_path_factory):
             # the paper's discovery, as when these bounds were measured: its many tasks keep the robots
             # flying, and localisation under way is what is tested
             params = MissionParams(
-                duration_s=300.0,
+                duration_s=240.0,
                 seed=2,
                 motion_model_error=error,
                 relocalise=relocalise,
                 discovery_mode="paper",
+                perception_process=False,  # the same mission as in a worker, without its start
             )
             done[name] = (Mission(scenario, params, out).run(), out)
         return done[name]
@@ -108,7 +110,7 @@ def missions(tmp_path_factory):
 
 def test_both_robots_stay_localised_over_a_mission(missions):
     """With the simulator's own coefficients: the robot without a DVL within 15 cm (median) and 60 cm
-    (worst) of the truth over 300 s, and doing its share (verified views); the robot with one within 5 cm
+    (worst) of the truth over 240 s, and doing its share (verified views); the robot with one within 5 cm
     and 15 cm. Before relocalisation the robot without a DVL was 26 cm off (median) after 240 s, and
     growing."""
     document, _ = missions("exact-model")

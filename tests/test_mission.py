@@ -344,7 +344,11 @@ def test_a_failed_robots_tasks_pass_to_the_survivor(tmp_path):
         dataclasses.replace(r, sensors=tuple(dict.fromkeys((*r.sensors, "dvl")))) for r in scenario.robots
     )
     scenario = dataclasses.replace(scenario, robots=with_dvl)
-    params = MissionParams(duration_s=110.0, seed=1, events=(MissionEvent(40.0, "fail", "rov1"),))
+    # perception inline: the same mission as in a worker process (test_mission.py proves it), without
+    # a second interpreter's start
+    params = MissionParams(
+        duration_s=110.0, seed=1, events=(MissionEvent(40.0, "fail", "rov1"),), perception_process=False
+    )
     mission = Mission(scenario, params, tmp_path)
     document = mission.run()
     survivor, failed = mission.auction.agents[0], mission.auction.agents[1]
@@ -382,7 +386,11 @@ def test_a_robot_joins_the_mission_and_the_auction_when_its_time_comes(tmp_path)
     scenario = _third_robot(load_mission(None)[0])
     # the paper's discovery, whose many tasks give the late robot some to win
     params = MissionParams(
-        duration_s=32.0, seed=2, events=(MissionEvent(15.0, "join", "rov2"),), discovery_mode="paper"
+        duration_s=32.0,
+        seed=2,
+        events=(MissionEvent(15.0, "join", "rov2"),),
+        discovery_mode="paper",
+        perception_process=False,
     )
     mission = Mission(scenario, params, tmp_path)
     document = mission.run()
@@ -410,7 +418,12 @@ def test_a_link_outage_drops_every_message_in_its_window(tmp_path):
     from maptidal.mission.run import MissionEvent
 
     scenario, _ = load_mission(None)
-    params = MissionParams(duration_s=28.0, seed=1, events=(MissionEvent(5.0, "outage", duration_s=15.0),))
+    params = MissionParams(
+        duration_s=28.0,
+        seed=1,
+        events=(MissionEvent(5.0, "outage", duration_s=15.0),),
+        perception_process=False,
+    )
     mission = Mission(scenario, params, tmp_path / "all")
     document = mission.run()
     inside = sum(1 for t, _, _ in mission.auction.transmissions if 5.0 <= t < 20.0)
@@ -481,6 +494,7 @@ def test_after_a_failure_the_survivor_finishes_every_task_and_the_mission_ends(t
         seed=1,
         discovery=DiscoveryParams(r_ex=3.0, theta_ex=1.2),
         events=(MissionEvent(FAIL_AT, "fail", "rov1"),),
+        perception_process=False,
     )
     document = Mission(scenario, params, tmp_path).run()
     assert document["finished"] and document["sim_time_s"] < 450.0

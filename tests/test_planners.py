@@ -28,7 +28,9 @@ REACH_BAND_M = (0.35, 2.0 - 0.35)
 def voronoi_mission(tmp_path_factory):
     scenario, _ = load_mission(None)
     out = tmp_path_factory.mktemp("voronoi")
-    document = Mission(scenario, MissionParams(duration_s=30.0, seed=2, planner="voronoi"), out).run()
+    document = Mission(
+        scenario, MissionParams(duration_s=30.0, seed=2, planner="voronoi", perception_process=False), out
+    ).run()
     return scenario, document, out
 
 

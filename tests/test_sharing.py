@@ -4,6 +4,7 @@ hand-made ledgers, and the failure scenario in the loop (3 robots, rov1 failing 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -171,6 +172,7 @@ def failure_mission(tmp_path_factory):
     scenario, params = prepare_mission(
         "assets/scenarios/failure.toml", duration_s=120.0, seed=0, discovery="paper"
     )
+    params = dataclasses.replace(params, perception_process=False)  # as in a worker, without its start
     out = tmp_path_factory.mktemp("failure")
     return Mission(scenario, params, out).run(), out
 
