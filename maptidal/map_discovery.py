@@ -198,8 +198,9 @@ def near_teammates(points: np.ndarray, teammates: np.ndarray | None, params: Map
 class RobotMap:
     """One robot's own map: fused landmarks by id, and the voxels its cameras have seen through.
 
-    :meth:`add_keyframe` folds in a keyframe: the fused positions of every landmark the front end holds
-    (they move as observations accumulate) and the rays from the camera to the landmarks it saw there."""
+    :meth:`add_keyframe` folds in a keyframe: the fused positions of the landmarks seen there (a landmark
+    seen again moves to its newer, better-fused position) and the rays from the camera to them;
+    :meth:`carve_view` carves the water between the camera and the keyframe's mesh."""
 
     params: MapAwareParams = field(default_factory=MapAwareParams)
     landmarks: dict[int, np.ndarray] = field(default_factory=dict)
