@@ -47,6 +47,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -205,21 +206,18 @@ class RobotMap:
     params: MapAwareParams = field(default_factory=MapAwareParams)
     landmarks: dict[int, np.ndarray] = field(default_factory=dict)
     free_voxels: set[int] = field(default_factory=set)
-    keyframes: int = 0
 
     def add_keyframe(
         self,
         camera_position: np.ndarray,
         seen_ids: np.ndarray,
         seen_points: np.ndarray,
-        fused_ids: np.ndarray | None = None,
-        fused_points: np.ndarray | None = None,
         teammates: np.ndarray | None = None,
     ) -> None:
-        """Carve the rays from ``camera_position`` to ``seen_points`` ``(N, 3)`` (landmarks ``seen_ids``
-        seen at this keyframe) and store their positions; ``fused_ids`` / ``fused_points`` update any
-        landmark's fused position (default: the seen ones). Rows with NaNs are skipped, and so are the
-        landmarks on a teammate (``teammates``: :func:`near_teammates`), which is no structure."""
+        """Carve the rays from ``camera_position`` to ``seen_points`` ``(N, 3)`` (the fused positions of
+        the landmarks ``seen_ids`` seen at this keyframe) and store those positions. Rows with NaNs are
+        skipped, and so are the landmarks on a teammate (``teammates``: :func:`near_teammates`), which is
+        no structure."""
         camera = np.asarray(camera_position, float).reshape(3)
         if not np.all(np.isfinite(camera)):
             return  # a lost pose carves nothing rather than carving the wrong water
@@ -227,13 +225,10 @@ class RobotMap:
         seen_ids = np.asarray(seen_ids, int).reshape(-1)
         finite = np.isfinite(seen_points).all(axis=1)
         self._carve(camera, seen_points[finite])
-        ids = seen_ids if fused_ids is None else np.asarray(fused_ids, int).reshape(-1)
-        points = seen_points if fused_points is None else np.asarray(fused_points, float).reshape(-1, 3)
-        on_teammate = near_teammates(points, teammates, self.params)
-        for landmark, point, skip in zip(ids.tolist(), points, on_teammate.tolist(), strict=True):
+        on_teammate = near_teammates(seen_points, teammates, self.params)
+        for landmark, point, skip in zip(seen_ids.tolist(), seen_points, on_teammate.tolist(), strict=True):
             if np.all(np.isfinite(point)) and not skip:
                 self.landmarks[landmark] = point.copy()
-        self.keyframes += 1
 
     def _carve(self, camera: np.ndarray, targets: np.ndarray) -> None:
         if len(targets) == 0:
@@ -265,8 +260,6 @@ class RobotMap:
         ``fy``, ``cx``, ``cy``, ``width`` and ``height``. The mesh is drawn into a depth image of
         ``cell_px`` pixel cells, each face at its nearest vertex's depth (so a face never claims water
         beyond itself), the nearest face winning. Returns how many voxels were carved."""
-        import cv2  # only here: the rest of the map needs numpy and scipy alone
-
         camera = np.asarray(camera_position, float).reshape(3)
         rotation = np.asarray(rotation, float).reshape(3, 3)
         vertices = np.asarray(mesh_vertices, float).reshape(-1, 3)

@@ -49,7 +49,7 @@ def _map_of(points, ids, camera, params=None) -> RobotMap:
     return robot_map
 
 
-def _face_at(points, centre, radius=0.12):
+def _face_at(points, centre):
     """Three landmarks around ``centre``, as the mesher would join them."""
     distance = np.linalg.norm(points - centre, axis=1)
     order = np.argsort(distance)

@@ -694,9 +694,6 @@ class Mission:
         estimate = self.sim.estimate(robot.name)  # the raw dead reckoning: the front end corrects it itself
         return camera_pose_from_body(estimate.position, rotation_from_rpy(*estimate.rpy), robot.left_offset)
 
-    def _reachable(self, rows: np.ndarray) -> np.ndarray:
-        return reachable(self.scenario.tank, rows, self.params.discovery.standoff)
-
     # ----- the loop -------------------------------------------------------------------------------
     def run(self, progress: Callable[[float, int, int, float, float], None] | None = None) -> dict:
         """Fly the mission; returns the final ``mission.json`` document. ``progress(now_s, found, done,
@@ -943,10 +940,10 @@ class Mission:
         agent = self.auction.agents[robot.index]
         new = result.new_tasks
         if self.params.discovery_mode == "map-aware":
-            reachable = np.ones(len(new), bool)  # checked on the robot's own map, in its perception
+            keep = np.ones(len(new), bool)  # checked on the robot's own map, in its perception
         else:
-            reachable = self._reachable(new)
-        for row, ok in zip(new, reachable, strict=True):
+            keep = reachable(self.scenario.tank, new, self.params.discovery.standoff)
+        for row, ok in zip(new, keep, strict=True):
             if not ok:
                 continue
             task = agent.discover_task(row[:3], row[3:], now_s=now)
@@ -966,7 +963,7 @@ class Mission:
             robot=robot.name,
             faces=result.faces,
             new_tasks=len(new),
-            reachable=int(reachable.sum()),
+            reachable=int(keep.sum()),
             frame_s=round(result.time_s, 3),
             **({"rules": result.rules} if result.rules is not None else {}),
         )
