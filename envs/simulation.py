@@ -114,6 +114,37 @@ class StereoSnapshot:
     sides: tuple[str, ...] = ("left", "right")
 
 
+# the path is counted in steps of at least this (m): station keeping bobs the body by a few mm every
+# control period (the depth loop's limit cycle), which would add metres of "travel" over a mission
+PATH_STEP_M = 0.05
+
+
+@dataclass
+class Odometry:
+    """What one robot has done since the reset, measured on the simulated truth: the distance its body
+    travelled (m: a polyline through its positions, a vertex whenever it is :data:`PATH_STEP_M` from the
+    last, so a few mm of bobbing adds nothing; a teleport by :meth:`Simulation.place` adds nothing) and
+    the electrical energy its thrusters drew (J: each thruster's power at its lagged thrust,
+    :class:`maptidal.controllers.thrusters.ThrusterPower`, times the time stepped)."""
+
+    path_m: float = 0.0
+    thruster_energy_j: float = 0.0
+    # the path's last vertex (None: the next position starts the path)
+    last_vertex: tuple[float, float, float] | None = field(default=None, repr=False, compare=False)
+
+    def move_to(self, position) -> None:
+        """Add the body's new position (x, y, z) to the path: a vertex if it is a path step from the
+        last."""
+        position = tuple(float(v) for v in position)
+        if self.last_vertex is None:
+            self.last_vertex = position
+            return
+        step = math.dist(position, self.last_vertex)
+        if step >= PATH_STEP_M:
+            self.path_m += step
+            self.last_vertex = position
+
+
 class Simulation:
     """A scenario running in MuJoCo with Fossen hydrodynamics, thrusters, sensors and cameras.
 
@@ -203,6 +234,13 @@ class Simulation:
         self._tracked: set[str] = set()
         self._estimators: dict[str, DeadReckoning] = {}
         self._readings: dict[str, dict] = {}
+        self._odometry: dict[str, Odometry] = {}
+        # where each robot's position lies in qpos (its free joint's), read for the odometry: xpos lags
+        # qpos by a physics step after mj_step, and set_state recomputes it
+        self._position_adr = {
+            name: int(self.model.jnt_qposadr[self.model.body_jntadr[slot.body_id]])
+            for name, slot in self._slots.items()
+        }
         # scenes for stereo snapshots, reused: allocating one costs about 20 ms
         self._free_scenes: queue.SimpleQueue[mujoco.MjvScene] = queue.SimpleQueue()
         # each camera's own-body geoms behind its near plane, left out of its scenes (no pixel changes)
@@ -240,6 +278,7 @@ class Simulation:
             sensors.reset(self.rng)
         mujoco.mj_forward(self.model, self.data)
         self.wall_time_s = 0.0
+        self._odometry = {robot: Odometry() for robot in self.robots}
         for robot, mode in self._flight_modes.items():
             self.set_flight_mode(robot, mode)
 
@@ -257,8 +296,9 @@ class Simulation:
         "_plants",
         "_thruster_gains",
         "water",
+        "_odometry",
     )
-    STATE_VERSION = 1
+    STATE_VERSION = 2  # 2: with the odometry
 
     def get_state(self) -> dict:
         """Everything the simulation's future depends on, copied: MuJoCo's integration state
@@ -320,6 +360,7 @@ class Simulation:
             attitude = attitude / np.linalg.norm(attitude)
         self.data.qpos[qpos : qpos + 3] = values
         self.data.qpos[qpos + 3 : qpos + 7] = attitude
+        self._odometry[robot].last_vertex = None  # a teleport is no travel: the path restarts here
         self.data.qvel[slot.dof_adr : slot.dof_adr + 6] = 0.0
         n = self._specs[robot].vehicle.n_thrusters
         self.data.act[slot.act_adr : slot.act_adr + n] = 0.0
@@ -561,6 +602,7 @@ class Simulation:
         start = time.perf_counter()
         mujoco.mj_step(self.model, self.data, nstep=int(n_steps))
         self.wall_time_s += time.perf_counter() - start
+        self._count_odometry(n_steps * self.scenario.timestep_s)
         for sensors in self._sensors.values():
             sensors.advance(n_steps * self.scenario.timestep_s, self.rng)
         diverged = self._instability_warnings() > bad_before
@@ -571,6 +613,21 @@ class Simulation:
                 f"last thruster commands {self.data.ctrl.round(3).tolist()}. Reset the simulation."
             )
         return self.time
+
+    def _count_odometry(self, seconds: float) -> None:
+        # the thrust at the period's end stands for the period: it lags its command by 0.1 s, five
+        # control periods, so it barely moves within one
+        for robot, slot in self._slots.items():
+            odometry = self._odometry[robot]
+            adr = self._position_adr[robot]
+            odometry.move_to(self.data.qpos[adr : adr + 3].tolist())
+            n = len(self._thruster_gains[robot])
+            act = self.data.act[slot.act_adr : slot.act_adr + n].tolist()
+            odometry.thruster_energy_j += self._plants[robot].thruster.power_w(act) * seconds
+
+    def odometry(self, robot: str) -> Odometry:
+        """``robot``'s distance travelled and thruster energy since the reset (a copy)."""
+        return copy.copy(self._odometry[self._check(robot)])
 
     def _instability_warnings(self) -> int:
         # MuJoCo resets the state itself on a bad qpos/qvel/qacc and counts a warning

@@ -16,7 +16,14 @@ from pathlib import Path
 import numpy as np
 
 from maptidal.controllers.pose import VehicleModel
-from maptidal.controllers.thrusters import PwmRange, ThrustCurve, linear_curve, t200_curve
+from maptidal.controllers.thrusters import (
+    T200_POWER,
+    PwmRange,
+    ThrustCurve,
+    ThrusterPower,
+    linear_curve,
+    t200_curve,
+)
 from maptidal.paths import asset
 
 VEHICLE_FILE = asset("bluerov2", "bluerov2.toml")
@@ -42,7 +49,8 @@ class ThrusterParams:
     surface_fade_m: a thruster's thrust fades linearly from full, when its centre is this far
     under the water surface, to none, when it is this far above (half the T200's ~0.1 m duct; a
     propeller in air pushes nothing, and one breaking the surface ventilates). curve: set only to
-    replace the curve that model and voltage_v name."""
+    replace the curve that model and voltage_v name. power: the electrical power each thruster draws
+    against its thrust, for the simulator's energy count (the T200's, fitted to the maker's data)."""
 
     model: str = "t200"
     voltage_v: float = 16.0
@@ -51,6 +59,7 @@ class ThrusterParams:
     time_constant_s: float = 0.1
     surface_fade_m: float = 0.05
     curve: ThrustCurve | None = None
+    power: ThrusterPower = T200_POWER
 
     def __post_init__(self) -> None:
         if self.model not in THRUSTER_MODELS:
@@ -98,6 +107,12 @@ class ThrusterParams:
         """Thrust (N) of the actuators' lagged normalised thrust in [-1, 1]."""
         act = np.asarray(act, float)
         return np.where(act >= 0, act * self.curve.max_forward_n, act * self.curve.max_reverse_n)
+
+    def power_w(self, act: list[float]) -> float:
+        """The electrical power (W) the thrusters draw, summed, at the lagged normalised thrusts ``act``:
+        :attr:`power` at :meth:`lagged_forces`, in plain Python (see ThrusterPower.total_watts)."""
+        forward, reverse = self.curve.max_forward_n, self.curve.max_reverse_n
+        return self.power.total_watts([x * forward if x >= 0 else x * reverse for x in act])
 
 
 @dataclass(frozen=True)

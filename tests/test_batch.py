@@ -22,6 +22,8 @@ from maptidal.mission.batch import (
     METRICS,
     WALL_CLOCK,
     aggregate,
+    batch_markdown,
+    coverage_bands,
     mission_metrics,
     parse_planners,
     parse_seeds,
@@ -88,6 +90,44 @@ def test_the_aggregate_is_numpys_over_the_rows():
     assert summary["bytes"]["std"] == pytest.approx(values.std())
     assert (summary["bytes"]["min"], summary["bytes"]["max"]) == (values.min(), values.max())
     assert summary["finished"] == {"count": 3, "of": 5}
+
+
+def test_a_metric_only_some_seeds_have_is_averaged_over_those_and_says_so():
+    rows = [
+        {"seed": s, "finished": True, **dict.fromkeys((*METRICS, *WALL_CLOCK), 1.0), "time_to_95_s": t}
+        for s, t in enumerate([40.0, None, 60.0, None])
+    ]
+    summary = aggregate(rows)
+    assert summary["time_to_95_s"]["mean"] == 50.0 and summary["time_to_95_s"]["count"] == 2
+    assert summary["bytes"]["count"] == 4
+    table = batch_markdown(summary, len(rows))
+    assert "| time_to_95_s |" in table and "50 (2 of 4)" in table
+    assert "| bytes | bytes | 1 |" in table
+
+
+def test_the_coverage_bands_are_the_steps_mean_and_spread():
+    """Two seeds' timelines, each held after its last view: the band at each time is the mean and the
+    standard deviation of the two values read off by hand."""
+    rows = [
+        {"seed": 0, "planner": "a", "coverage_timeline": [[0, 0], [10, 40], [20, 80]]},
+        {"seed": 1, "planner": "a", "coverage_timeline": [[0, 0], [15, 60]]},
+        {"seed": 0, "planner": "b", "coverage_timeline": [[0, 0]]},
+    ]
+    grid = np.array([0.0, 9.9, 10.0, 14.0, 15.0, 25.0, 100.0])
+    by_hand = {
+        0.0: (0, 0),
+        9.9: (0, 0),
+        10.0: (40, 0),
+        14.0: (40, 0),
+        15.0: (40, 60),
+        25.0: (80, 60),
+        100.0: (80, 60),
+    }
+    bands = coverage_bands(rows, grid)
+    expected = np.array([by_hand[t] for t in grid], float)
+    np.testing.assert_allclose(bands["a"][0], expected.mean(axis=1))
+    np.testing.assert_allclose(bands["a"][1], expected.std(axis=1))
+    np.testing.assert_allclose(bands["b"][0], 0.0)
 
 
 def _free_port() -> int:
@@ -158,6 +198,7 @@ def test_a_batch_gives_the_same_numbers_locally_and_on_ray(tmp_path, ray_cluster
     csv_lines = (tmp_path / "local" / "batch.csv").read_text().splitlines()
     assert csv_lines[0].startswith("planner,seed,folder,finished") and len(csv_lines) == 3
     assert (tmp_path / "local" / "batch.png").stat().st_size > 0
+    assert (tmp_path / "local" / "coverage_time.png").stat().st_size > 0
     assert "| tasks_found |" in (tmp_path / "local" / "batch.md").read_text()
     assert "| tasks_found |" in local.stdout
 

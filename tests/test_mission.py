@@ -17,8 +17,9 @@ import numpy as np
 import pytest
 from cli_helpers import assert_one_line_error, maptidal_here, run_maptidal
 
+from maptidal.evaluation.coverage import CoverageModel, CoverageParams
 from maptidal.mission.config import load_mission
-from maptidal.mission.outputs import read_events
+from maptidal.mission.outputs import mission_metrics, read_events, time_to_coverage
 from maptidal.mission.run import Mission, MissionParams
 
 
@@ -725,3 +726,64 @@ def test_drawing_on_the_loops_own_thread_gives_the_same_mission(short_mission, t
     assert document["tasks"] == first["tasks"] and document["comms"] == first["comms"]
     without_start = lambda out: [e for e in read_events(out) if e["kind"] != "start"]  # noqa: E731
     assert without_start(tmp_path) == without_start(first_out)
+
+
+def test_the_coverage_timeline_steps_at_each_scored_view(short_mission, tmp_path):
+    """A point per verified capture, at its time; each point is the coverage evaluation of the views
+    scored so far (evaluated afresh here, not incrementally); the last is the report's coverage; the
+    report rebuilt from the event log gives the same timeline."""
+    mission, document, out = short_mission
+    timeline = document["coverage_timeline"]
+    scored = [e for e in read_events(out) if e["kind"] == "done" and e["verified"]]
+    assert len(scored) >= 3
+    assert timeline[0] == [0.0, 0.0]
+    assert [t for t, _ in timeline[1:]] == [e["t"] for e in scored]
+    model = CoverageModel.from_tank(mission.scenario.tank, CoverageParams(occlusion=True))
+    for k in (1, len(scored) // 2, len(scored)):
+        report, _ = model.evaluate(np.array([e["view"] for e in scored[:k]]))
+        assert timeline[k][1] == pytest.approx(100.0 - report.pct_uninspected, abs=1e-9)
+    assert timeline[-1][1] == pytest.approx(100.0 - document["coverage"]["occluded"]["pct_uninspected"])
+    rebuilt_folder = tmp_path / "rebuilt"
+    shutil.copytree(out, rebuilt_folder)
+    assert run_maptidal("report", rebuilt_folder).returncode == 0
+    rebuilt = json.loads((rebuilt_folder / "mission.json").read_text())
+    np.testing.assert_allclose(rebuilt["coverage_timeline"], timeline, atol=1e-9)
+    assert (out / "coverage_time.png").stat().st_size > 0 and "coverage_time.png" in (
+        out / "report.md"
+    ).read_text()
+
+
+def test_time_to_coverage_is_the_first_time_the_share_is_reached():
+    timeline = [[0.0, 0.0], [10.0, 50.0], [20.0, 94.9], [30.0, 95.0], [40.0, 99.0]]
+    assert time_to_coverage(timeline, 95.0) == 30.0
+    assert time_to_coverage(timeline, 50.0) == 10.0
+    assert time_to_coverage(timeline, 99.5) is None
+
+
+def _coarse_path(points: np.ndarray, step_m: float) -> float:
+    """A polyline's length through ``points``, a vertex whenever one is ``step_m`` from the last."""
+    length, last = 0.0, points[0]
+    for point in points[1:]:
+        if np.linalg.norm(point - last) >= step_m:
+            length, last = length + float(np.linalg.norm(point - last)), point
+    return length
+
+
+def test_each_robot_s_odometry_follows_its_trajectory(short_mission):
+    """The simulator's path (measured every control period) agrees with a coarse path through the
+    trajectory file's once-a-second true positions, a vertex every 20 cm (each 1-2 cm of bobbing left
+    out); the thrusters drew a plausible average power (between an idle hover's watt and eight T200s at
+    full throttle); the mission's metrics are the robots' sums."""
+    _, document, out = short_mission
+    rows = [line.split(",") for line in (out / "trajectories.csv").read_text().splitlines()[1:]]
+    for name, odometry in document["odometry"].items():
+        points = np.array([[float(v) for v in row[2:5]] for row in rows if row[1] == name])
+        coarse = _coarse_path(points, 0.2)
+        assert abs(odometry["path_m"] - coarse) <= 0.25 * coarse + 0.2, (odometry["path_m"], coarse)
+        mean_power_w = odometry["thruster_energy_j"] / document["sim_time_s"]
+        assert 1.0 < mean_power_w < 8 * 380.0
+    metrics = mission_metrics(document)
+    assert metrics["path_m"] == pytest.approx(sum(o["path_m"] for o in document["odometry"].values()))
+    assert metrics["thruster_energy_kj"] == pytest.approx(
+        sum(o["thruster_energy_j"] for o in document["odometry"].values()) / 1000.0
+    )

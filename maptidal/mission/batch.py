@@ -6,8 +6,11 @@ shared file system; the metrics come back to the driver in any case). The driver
 lands:
 
 - ``batch.csv``: a row of metrics per seed, rewritten atomically;
-- at the end, ``batch.json`` (the rows, and the mean, standard deviation, minimum and maximum of every
-  metric), ``batch.md`` (the same as a table) and ``batch.png`` (a panel per metric, every seed a dot).
+- at the end, ``batch.json`` (the rows with each mission's coverage timeline, and the mean, standard
+  deviation, minimum and maximum of every metric), ``batch.md`` (the same as a table), ``batch.png`` (a
+  panel per metric, every seed a dot) and ``coverage_time.png`` (the walls' inspected share against
+  time: the mean over seeds and a band of one standard deviation, each mission held at its last value
+  after it ends).
 
 With several planners (``--planners maptidal,voronoi,boustrophedon`` or ``all``) every planner flies
 every seed, each in ``PLANNER/seed_NNN/``; the rows carry the planner, ``batch.json``'s summary is one
@@ -44,12 +47,27 @@ METRICS = {
     "mean_views": "views per voxel",
     "mad": "MAD",
     "completion_time_s": "s (the time limit if unfinished)",
+    "time_to_95_s": "s to 95 % of the walls inspected (seeds that reached it)",
+    "path_m": "m travelled, the team's",
+    "thruster_energy_kj": "kJ drawn by the team's thrusters (T200 power law)",
     "messages": "messages",
     "bytes": "bytes",
     "lost": "messages lost",
     "tasks_lost": "tasks that died with a failed robot",
 }
-WALL_CLOCK = ("realtime_factor", "wall_time_s")  # depend on the machine, not on the seed
+WALL_CLOCK = ("realtime_factor", "wall_time_s")
+# batch.png's panels and their titles
+PANELS = {
+    "pct_uninspected": "walls uninspected (%, occlusion on)",
+    "tasks_found": "tasks found",
+    "tasks_done": "tasks done",
+    "completion_time_s": "finish time, or the cap (s)",
+    "time_to_95_s": "time to 95 % inspected (s)",
+    "path_m": "team's path (m)",
+    "thruster_energy_kj": "team's thruster energy (kJ)",
+    "bytes": "bytes sent",
+    "mad": "MAD of views per voxel",
+}  # depend on the machine, not on the seed
 
 
 @dataclass(frozen=True)
@@ -115,7 +133,13 @@ def run_one(run: BatchRun) -> dict:
     document = Mission(scenario, params, run.out_dir).run()
     folder = Path(run.out_dir)
     name = folder.name if run.planner is None else f"{folder.parent.name}/{folder.name}"
-    return {"seed": run.seed, "planner": params.planner, "folder": name, **mission_metrics(document)}
+    return {
+        "seed": run.seed,
+        "planner": params.planner,
+        "folder": name,
+        **mission_metrics(document),
+        "coverage_timeline": document.get("coverage_timeline", [[0.0, 0.0]]),
+    }
 
 
 def aggregate(rows: list[dict]) -> dict:
@@ -125,13 +149,14 @@ def aggregate(rows: list[dict]) -> dict:
         values = np.array([row[name] for row in rows if row.get(name) is not None], float)
         values = values[np.isfinite(values)]
         if len(values) == 0:
-            summary[name] = {"mean": None, "std": None, "min": None, "max": None}
+            summary[name] = {"mean": None, "std": None, "min": None, "max": None, "count": 0}
             continue
         summary[name] = {
             "mean": float(values.mean()),
             "std": float(values.std()),
             "min": float(values.min()),
             "max": float(values.max()),
+            "count": len(values),  # the rows that have it (time_to_95_s: the seeds that reached 95 %)
         }
     summary["finished"] = {"count": sum(1 for row in rows if row["finished"]), "of": len(rows)}
     return summary
@@ -163,11 +188,17 @@ def batch_markdown(summary: dict, runs: int) -> str:
             lines.append(f"| {name} | {unit} | n/a | n/a | n/a | n/a |")
             continue
         lines.append(
-            f"| {name} | {unit} | {figures['mean']:.3g} | {figures['std']:.3g} | {figures['min']:.3g} "
-            f"| {figures['max']:.3g} |"
+            f"| {name} | {unit} | {figures['mean']:.3g}{_of(figures, runs)} | {figures['std']:.3g} "
+            f"| {figures['min']:.3g} | {figures['max']:.3g} |"
         )
-    lines += ["", "![every seed](batch.png)", ""]
+    lines += ["", "![every seed](batch.png)", "", "![coverage against time](coverage_time.png)", ""]
     return "\n".join(lines)
+
+
+def _of(figures: dict, runs: int) -> str:
+    """The suffix ' (k of n)' when a metric is known for only some of the runs, else nothing."""
+    count = figures.get("count", runs)
+    return "" if count == runs else f" ({count} of {runs})"
 
 
 def planners_markdown(summaries: dict[str, dict], runs: int) -> str:
@@ -187,10 +218,20 @@ def planners_markdown(summaries: dict[str, dict], runs: int) -> str:
         cells = []
         for planner in planners:
             figures = summaries[planner][name]
-            spread = "n/a" if figures["mean"] is None else f"{figures['mean']:.3g} +- {figures['std']:.2g}"
+            spread = (
+                "n/a"
+                if figures["mean"] is None
+                else f"{figures['mean']:.3g} +- {figures['std']:.2g}{_of(figures, runs)}"
+            )
             cells.append(spread)
         lines.append(f"| {name} | {unit} | " + " | ".join(cells) + " |")
-    lines += ["", "![every seed of every planner](batch.png)", ""]
+    lines += [
+        "",
+        "![every seed of every planner](batch.png)",
+        "",
+        "![coverage against time, mean and one standard deviation](coverage_time.png)",
+        "",
+    ]
     return "\n".join(lines)
 
 
@@ -202,8 +243,8 @@ def plot_batch(rows: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator
 
-    names = ("pct_uninspected", "tasks_found", "tasks_done", "completion_time_s", "bytes", "mad")
-    figure, axes = plt.subplots(2, 3, figsize=(11, 6))
+    names = tuple(PANELS)
+    figure, axes = plt.subplots(3, 3, figsize=(11, 8.5))
     planners = list(dict.fromkeys(row.get("planner") for row in rows))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for axis, name in zip(axes.flat, names, strict=True):
@@ -218,7 +259,10 @@ def plot_batch(rows: list[dict], path: Path) -> None:
                 mean, std = np.nanmean(values), np.nanstd(values)
                 axis.axhline(mean, color=colour, lw=1)
                 axis.axhspan(mean - std, mean + std, color=colour, alpha=0.1, lw=0)
-        axis.set_title(f"{name} ({METRICS[name]})", fontsize=9)
+        axis.set_title(PANELS[name], fontsize=9)
+        if not any(row.get(name) is not None for row in rows):
+            axis.text(0.5, 0.5, "no seed has it", ha="center", va="center", transform=axis.transAxes)
+            axis.set_yticks([])
         axis.set_xlabel("seed", fontsize=8)
         axis.xaxis.set_major_locator(MaxNLocator(integer=True))
         axis.tick_params(labelsize=8)
@@ -226,6 +270,56 @@ def plot_batch(rows: list[dict], path: Path) -> None:
         axes.flat[0].legend(fontsize=8)
     runs = len({row["seed"] for row in rows})
     figure.suptitle(f"{', '.join(map(str, planners))} over {runs} seeds (line: mean, band: one std)")
+    figure.tight_layout()
+    save_png(figure, path)
+
+
+def coverage_bands(rows: list[dict], grid: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each planner's inspected share (%) on the time ``grid``: the mean over its seeds and the standard
+    deviation. A mission's share is a step function of its timeline, held after its last view and after
+    it ends (its inspection is what it is)."""
+    bands = {}
+    for planner in dict.fromkeys(row.get("planner") for row in rows):
+        curves = []
+        for row in rows:
+            if row.get("planner") != planner:
+                continue
+            timeline = np.array(row.get("coverage_timeline", [[0.0, 0.0]]), float).reshape(-1, 2)
+            index = np.searchsorted(timeline[:, 0], grid, side="right") - 1
+            curves.append(timeline[np.clip(index, 0, None), 1])
+        curves_array = np.array(curves)
+        bands[planner] = (curves_array.mean(axis=0), curves_array.std(axis=0))
+    return bands
+
+
+def plot_coverage_bands(rows: list[dict], path: Path) -> None:
+    """Coverage against time, one line (the mean over seeds) and band (one standard deviation) per
+    planner, with the 95 % mark."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    end = max(float(row["completion_time_s"]) for row in rows)
+    grid = np.linspace(0.0, max(end, 1.0), 400)
+    figure, axis = plt.subplots(figsize=(8, 4))
+    for planner, (mean, std) in coverage_bands(rows, grid).items():
+        line = axis.plot(grid, mean, lw=1.5, label=str(planner))[0]
+        axis.fill_between(
+            grid,
+            np.clip(mean - std, 0, 100),
+            np.clip(mean + std, 0, 100),
+            color=line.get_color(),
+            alpha=0.15,
+            lw=0,
+        )
+    axis.axhline(95.0, color="0.5", ls="--", lw=0.8, label="95 %")
+    runs = len({row["seed"] for row in rows})
+    axis.set_title(f"Walls inspected against time, {runs} seeds (line: mean, band: one std)")
+    axis.set_xlabel("simulated time (s)")
+    axis.set_ylabel("inspected (%, occlusion on)")
+    axis.set_ylim(0, 100)
+    axis.legend(fontsize=8, loc="lower right")
     figure.tight_layout()
     save_png(figure, path)
 
@@ -287,4 +381,5 @@ def run_batch(
     atomic_write_json(out / "batch.json", {"executor": executor, "rows": rows, "summary": summary})
     atomic_write_text(out / "batch.md", markdown)
     plot_batch(rows, out / "batch.png")
+    plot_coverage_bands(rows, out / "coverage_time.png")
     return rows, summary

@@ -5,7 +5,8 @@
 - ``images/``: the image captured at each task;
 - ``mission.json``: an atomic snapshot every few simulated seconds, and the final document;
 - at the end: ``top_view.png``, ``histogram.png``, ``voxel_views.png``, ``timeline.png``,
-  ``localisation.png`` and ``report.md``.
+  ``coverage_time.png`` (the walls' inspected share against time), ``localisation.png`` and
+  ``report.md``.
 
 A mission killed midway leaves a readable ``events.jsonl`` (at worst its last line cut, which is
 skipped) and its last snapshot; :func:`rebuild` makes ``mission.json``, the plots and ``report.md`` again
@@ -33,6 +34,7 @@ MISSION_FILES = (
     "report.md",
     "top_view.png",
     "timeline.png",
+    "coverage_time.png",
     "localisation.png",
     "histogram.png",
     "voxel_views.png",
@@ -95,11 +97,13 @@ class MissionWriter:
         """Replace ``mission.json`` atomically."""
         atomic_write_json(self.root / "mission.json", document)
 
-    def finish(self, document: dict, views: np.ndarray, tank) -> dict:
-        """Add the coverage of the captured views, write ``mission.json``, the plots and ``report.md``."""
+    def finish(self, document: dict, views: np.ndarray, view_times: np.ndarray, tank) -> dict:
+        """Add the coverage of the captured views (``view_times``: when each was captured), write
+        ``mission.json``, the plots and ``report.md``."""
         self._events.close()
         self._trajectories.close()
         document["coverage"], occluded = coverage_of(views, tank)
+        document["coverage_timeline"] = coverage_timeline(views, view_times, tank)
         document["localisation"] = localisation_errors(self.root, list(document.get("robots", {})))
         atomic_write_json(self.root / "mission.json", document)
         write_plots(self.root, document, views, tank, occluded)
@@ -123,6 +127,40 @@ def coverage_of(views: np.ndarray, tank) -> tuple[dict, tuple | None]:
         if occlusion:
             occluded = (model, report, per_voxel)
     return out, occluded
+
+
+def coverage_timeline(views: np.ndarray, times: np.ndarray, tank) -> list[list[float]]:
+    """The walls' inspected share (% of the coverage voxels seen by some view, occlusion on) against
+    simulated time: ``[0, 0]``, then ``[t, %]`` after each view, in the order of ``times``. Its last value
+    is 100 minus the coverage report's ``pct_uninspected``."""
+    from maptidal.evaluation.coverage import CoverageModel, CoverageParams, SeenVoxels
+
+    views = np.asarray(views, float).reshape(-1, 6)
+    times = np.asarray(times, float).reshape(-1)
+    if len(times) != len(views):
+        raise ValueError(f"{len(views)} views but {len(times)} capture times")
+    seen = SeenVoxels(CoverageModel.from_tank(tank, CoverageParams(occlusion=True)))
+    timeline = [[0.0, 0.0]]
+    for k in np.argsort(times, kind="stable"):
+        seen.look(views[k])
+        timeline.append([round(float(times[k]), 3), 100.0 * float(seen.seen.mean())])
+    return timeline
+
+
+def time_to_coverage(timeline: list[list[float]], pct: float) -> float | None:
+    """The first time (s) the inspected share reached ``pct`` %, or None if it never did."""
+    return next((t for t, covered in timeline if covered >= pct - 1e-9), None)
+
+
+def team_odometry(document: dict) -> tuple[float | None, float | None]:
+    """The team's distance travelled (m) and thruster energy (kJ), summed over the robots' odometry
+    (None, None for a document without it)."""
+    odometry = document.get("odometry")
+    if not odometry:
+        return None, None
+    path = sum(row["path_m"] for row in odometry.values())
+    energy = sum(row["thruster_energy_j"] for row in odometry.values()) / 1000.0
+    return float(path), float(energy)
 
 
 def read_events(root) -> list[dict]:
@@ -228,6 +266,8 @@ def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: t
     figure.tight_layout()
     save_png(figure, root / "timeline.png")
 
+    plot_coverage_time(document, root / "coverage_time.png")
+
     figure, axis = plt.subplots(figsize=(8, 3))
     for name in robots:
         mine = rows[rows[:, 0] == robots.index(name)] if len(rows) else rows
@@ -241,6 +281,32 @@ def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: t
         axis.legend(fontsize=7)
     figure.tight_layout()
     save_png(figure, root / "localisation.png")
+
+
+def plot_coverage_time(document: dict, path: Path) -> None:
+    """The walls' inspected share against simulated time, as a step per captured view, held to the
+    mission's end, with the 95 % mark."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    timeline = np.array(document.get("coverage_timeline", [[0.0, 0.0]]), float).reshape(-1, 2)
+    end = max(float(document.get("sim_time_s", 0.0)), float(timeline[-1, 0]))
+    figure, axis = plt.subplots(figsize=(8, 3))
+    axis.step(np.r_[timeline[:, 0], end], np.r_[timeline[:, 1], timeline[-1, 1]], where="post", lw=1.5)
+    axis.axhline(95.0, color="0.5", ls="--", lw=0.8, label="95 %")
+    reached = time_to_coverage(timeline.tolist(), 95.0)
+    axis.set_title(
+        "Walls inspected by the scored views (occlusion on): "
+        + (f"95 % at {reached:.0f} s" if reached is not None else f"{timeline[-1, 1]:.0f} % at the end")
+    )
+    axis.set_xlabel("simulated time (s)")
+    axis.set_ylabel("inspected (%)")
+    axis.set_ylim(0, 100)
+    axis.legend(fontsize=7, loc="lower right")
+    figure.tight_layout()
+    save_png(figure, path)
 
 
 def localisation_errors(root, robots: list[str]) -> dict:
@@ -307,6 +373,7 @@ def mission_metrics(document: dict) -> dict:
     tasks = document.get("tasks", [])
     coverage = document.get("coverage", {}).get("occluded", {})
     comms = document.get("comms")  # None: unknown (a log rebuilt without a readable snapshot)
+    path_m, energy_kj = team_odometry(document)
     return {
         "finished": bool(document.get("finished")),
         "tasks_found": len(tasks),
@@ -317,6 +384,10 @@ def mission_metrics(document: dict) -> dict:
         "mean_views": float(coverage.get("mean_views", 0.0)),
         "mad": coverage.get("mad"),  # None without captured views
         "completion_time_s": float(document.get("sim_time_s", 0.0)),
+        # the first time the scored views had seen 95 % of the walls (None: never)
+        "time_to_95_s": time_to_coverage(document.get("coverage_timeline", []), 95.0),
+        "path_m": path_m,  # the team's, summed over robots
+        "thruster_energy_kj": energy_kj,
         "messages": None if comms is None else int(comms.get("messages", 0)),
         "bytes": None if comms is None else int(comms.get("bytes", 0)),
         "lost": None if comms is None else int(comms.get("lost", 0)),
@@ -356,6 +427,8 @@ def report_markdown(document: dict) -> str:
         "![top view](top_view.png)",
         "",
         "![timeline](timeline.png)",
+        "",
+        "![coverage against time](coverage_time.png)",
         "",
         "![histogram](histogram.png)",
         "",
@@ -494,6 +567,14 @@ def summary_table(document: dict) -> str:
         # a snapshot of the auction, not a fault: on a slow channel two bundles may hold a task for a while
         ("tasks in two bundles at the end", str(document.get("allocation_conflicts", "n/a"))),
         ("walls uninspected (occluded)", f"{m['pct_uninspected']:.1f} %"),
+        (
+            "95 % of the walls inspected at",
+            "not reached" if m["time_to_95_s"] is None else f"{m['time_to_95_s']:.1f} s",
+        ),
+        (
+            "path / thruster energy (team)",
+            "unknown" if m["path_m"] is None else f"{m['path_m']:.1f} m / {m['thruster_energy_kj']:.1f} kJ",
+        ),
         *([("tasks lost with failed robots", str(m["tasks_lost"]))] if document.get("tasks_lost") else []),
         (
             "messages / bytes / lost",
@@ -519,7 +600,7 @@ def rebuild(root, tank) -> dict:
         except json.JSONDecodeError:
             snapshot = {}
     tasks: dict[int, dict] = {}
-    views = []
+    views, view_times = [], []
     robots: dict[str, str] = {}
     done_by_robot: dict[str, dict[str, int]] = {}
     for event in events:
@@ -556,6 +637,7 @@ def rebuild(root, tank) -> dict:
             counts["verified"] += int(bool(verified))
             if "view" in event and verified:  # only the views that show their task are scored
                 views.append(event["view"])
+                view_times.append(event["t"])
         elif kind == "fail":
             robots[event["robot"]] = "failed"
     inspections = Counter(e["task"] for e in events if e["kind"] == "done")
@@ -581,6 +663,7 @@ def rebuild(root, tank) -> dict:
         document["video"] = {"file": "mission.part.mp4", "partial": True}
     views_array = np.array(views).reshape(-1, 6)
     document["coverage"], occluded = coverage_of(views_array, tank)
+    document["coverage_timeline"] = coverage_timeline(views_array, np.array(view_times), tank)
     document["localisation"] = localisation_errors(root, list(document["robots"]))
     atomic_write_json(root / "mission.json", document)
     write_plots(root, document, views_array, tank, occluded)

@@ -539,6 +539,7 @@ class Mission:
             ("physics", "rendering", "perception", "discovery", "allocation", "control"), 0.0
         )
         self.captured: list[np.ndarray] = []  # the true camera viewpoints where images were captured
+        self.captured_at: list[float] = []  # when each was captured (s)
         self.inspections: dict[int, int] = {}  # task key -> images captured of it
         self.video = MissionVideo(self, params) if params.video else None
         # what the captured views have inspected so far (occlusion on), for the progress bar and snapshots
@@ -810,7 +811,7 @@ class Mission:
         document = self.document(now, time.perf_counter() - wall_start, finished=finished)
         if self.video is not None:
             document["video"] = {"file": self.video.path.name, "frames": self.video.frames}
-        self.writer.finish(document, self.captured_views(), self.scenario.tank)
+        self.writer.finish(document, self.captured_views(), np.array(self.captured_at), self.scenario.tank)
         return document
 
     def _poses(self, robot: _Robot) -> dict:
@@ -1055,6 +1056,7 @@ class Mission:
         view = np.r_[truth.position, truth.forward]
         if judged.verified:  # only views that show the task are scored
             self.captured.append(view)
+            self.captured_at.append(now)
             self.seen.look(view)
         robot.claimed += 1
         robot.verified += int(judged.verified)
@@ -1159,6 +1161,12 @@ class Mission:
             "wall_time_s": wall_s,
             "robots": {r.name: r.activity for r in self.robots.values()},
             "inspected_pct": self.inspected_pct(),
+            # each robot's distance travelled and thruster energy, measured on the simulated truth
+            "odometry": {
+                name: {"path_m": odometry.path_m, "thruster_energy_j": odometry.thruster_energy_j}
+                for name in self.robots
+                for odometry in (self.sim.odometry(name),)
+            },
             # claimed: the robot said the task was done; verified: its true view was within tolerance
             "done_by_robot": {
                 r.name: {"claimed": r.claimed, "verified": r.verified} for r in self.robots.values()
