@@ -32,6 +32,10 @@ Ranges (:data:`DEFAULT_RANGES`; each key is drawn uniformly per episode, per rob
   datasheet-typical by default): our choice;
 - ``turbidity`` 0.1 to 0.6 is the water's turbidity (:class:`maptidal.envs.water.WaterParams`): our
   choice, clear to murky tank water.
+- ``turbulence_m_s`` 0 to 0.03 m/s is the standard deviation of an Ornstein-Uhlenbeck gust on each axis
+  about the current, with a 2 s time constant (``MapTidal/StationKeeping-v1``'s default as the top):
+  our choice, for the eddies pumps and a robot's own wake leave in a tank. It is the environment's,
+  not the simulation's: :class:`maptidal.envs.gym.core.MapTidalEnv` blows the gust each control period.
 
 ``randomize=True`` draws every key from its default range; a dict draws only the keys it names, each
 from ``(low, high)`` or fixed at one number (to test a policy on shifted parameters). A key not listed,
@@ -65,6 +69,7 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "current_m_s": (0.0, 0.1),
     "noise_scale": (0.5, 2.0),
     "turbidity": (0.1, 0.6),
+    "turbulence_m_s": (0.0, 0.03),
 }
 # what the physics allows of each key: (lowest, highest, whether the lowest itself is allowed)
 PHYSICAL_BOUNDS: dict[str, tuple[float, float, bool]] = {
@@ -80,6 +85,7 @@ PHYSICAL_BOUNDS: dict[str, tuple[float, float, bool]] = {
     "current_m_s": (0.0, 5.0, True),  # check_current's bound
     "noise_scale": (0.0, 100.0, True),
     "turbidity": (0.0, 1.0, True),
+    "turbulence_m_s": (0.0, 0.5, True),  # StationKeeping's own bound
 }
 
 
@@ -150,7 +156,8 @@ def _range(key: str, value: object) -> tuple[float, float]:
 
 def apply(sim, robot: str, draw: Mapping[str, object]) -> None:
     """Give ``robot`` of ``sim`` (a :class:`maptidal.envs.simulation.Simulation`, just reset) the drawn
-    plant, sensor noise, water and current; keys not drawn keep the scenario's values."""
+    plant, sensor noise, water and current; keys not drawn keep the scenario's values. The turbulence is
+    the environment's to blow (module docstring)."""
     # what the robot believes of itself, the scenario's: each draw is made about it, never about the last
     vehicle = next(spec.vehicle for spec in sim.scenario.robots if spec.name == robot)
     mass = float(draw.get("mass_scale", 1.0))

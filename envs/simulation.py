@@ -442,6 +442,12 @@ class Simulation:
         """The water the cameras look through from now on (turbidity, noise, vignetting)."""
         self.water = WaterModel(params)
 
+    @property
+    def current(self) -> np.ndarray:
+        """The water current now (m/s, world frame; a copy)."""
+        slot = hydrodynamics.HEADER + hydrodynamics.SLOT_CURRENT
+        return self.data.userdata[slot : slot + 3].copy()
+
     def set_current(self, current_world) -> None:
         """Change the water current (m/s, world frame) from now on; :meth:`reset` restores the
         scenario's."""

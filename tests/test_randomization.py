@@ -15,6 +15,7 @@ import pytest
 import maptidal.envs  # noqa: F401  (registers the MapTidal/ environments)
 from maptidal.controllers.thrusters import t200_curve_between
 from maptidal.envs import randomization
+from maptidal.envs.gym.core import gust_step
 from maptidal.envs.randomization import DEFAULT_RANGES, Randomization
 from maptidal.envs.simulation import Simulation
 
@@ -238,6 +239,80 @@ def test_the_team_draws_each_robot_its_own_vehicle_and_one_water():
     draws = info["randomization"]
     assert set(draws) == {"rov0", "rov1"} and masses[0] != masses[1]
     assert "current_m_s" in draws["rov0"] and "current_m_s" not in draws["rov1"]
+
+
+def _currents(env, steps: int) -> np.ndarray:
+    """The water current after each of ``steps`` steps that hold still."""
+    hold = np.zeros(env.action_space.shape, np.float32)
+    currents = []
+    for _ in range(steps):
+        env.step(hold)
+        currents.append(env.unwrapped.sim.current)
+    return np.array(currents)
+
+
+@pytest.mark.parametrize("dt", [0.02, 0.1])
+def test_the_gust_is_an_ornstein_uhlenbeck_process(dt):
+    """Over 2000 time constants the gust's standard deviation is sigma on each axis, whatever the step,
+    and its correlation after one time constant (2 s) is 1/e, as the process's stationary law says
+    (closed forms, not the update's code; tolerances about three standard errors)."""
+    rng = np.random.default_rng(7)
+    steps = round(4000 / dt)
+    gust, samples = np.zeros(3), np.empty((steps, 3))
+    for k in range(steps):
+        gust = gust_step(gust, 0.05, dt, rng)
+        samples[k] = gust
+    assert samples.std(axis=0) == pytest.approx([0.05] * 3, rel=0.08)
+    lag = round(2.0 / dt)
+    correlation = np.mean([np.corrcoef(samples[:-lag, k], samples[lag:, k])[0, 1] for k in range(3)])
+    assert correlation == pytest.approx(math.exp(-1.0), abs=0.06)
+
+
+def test_the_drawn_turbulence_blows_about_the_episodes_current():
+    """GoToPose with turbulence drawn: each step's current is the episode's mean current (here a drawn
+    0.05 m/s) plus the gust, which moves."""
+    env = gymnasium.make("MapTidal/GoToPose-v1", randomize={"turbulence_m_s": 0.05, "current_m_s": 0.05})
+    try:
+        _, info = env.reset(seed=4)
+        mean = env.unwrapped.mean_current.copy()
+        hold = np.zeros(env.action_space.shape, np.float32)
+        currents, gusts = [], []
+        for _ in range(60):
+            env.step(hold)
+            currents.append(env.unwrapped.sim.current)
+            gusts.append(env.unwrapped.gust.copy())
+    finally:
+        env.close()
+    heading = info["randomization"]["current_heading_rad"]
+    np.testing.assert_allclose(mean, [0.05 * math.cos(heading), 0.05 * math.sin(heading), 0.0], atol=1e-12)
+    np.testing.assert_allclose(np.array(currents), mean + np.array(gusts), atol=1e-12)
+    assert np.ptp(np.array(gusts), axis=0).min() > 0.002
+
+
+def test_without_turbulence_the_current_holds_still():
+    for randomize in (None, {"current_m_s": 0.05}):
+        env = gymnasium.make("MapTidal/GoToPose-v1", randomize=randomize)
+        try:
+            env.reset(seed=1)
+            currents = _currents(env, 30)
+        finally:
+            env.close()
+        assert np.all(currents == currents[0])
+
+
+def test_the_team_shares_one_drawn_turbulence():
+    env = gymnasium.make("MapTidal/TeamInspection-v1", randomize={"turbulence_m_s": 0.05})
+    try:
+        _, info = env.reset(seed=2)
+        hold = {name: np.zeros(space.shape, np.float32) for name, space in env.action_space.items()}
+        currents = []
+        for _ in range(20):
+            env.step(hold)
+            currents.append(env.unwrapped.sim.current)
+    finally:
+        env.close()
+    assert info["randomization"] == {"rov0": {"turbulence_m_s": 0.05}, "rov1": {}}
+    assert np.ptp(np.array(currents), axis=0).max() > 0.005
 
 
 @pytest.mark.parametrize(

@@ -296,6 +296,18 @@ class EpisodeLength:
         return self._own_time_limit and steps >= self.max_steps
 
 
+# the turbulence's time constant (s): gusts of a few seconds, slow enough for a controller to fight
+GUST_TIME_CONSTANT_S = 2.0
+
+
+def gust_step(gust: np.ndarray, sigma_m_s: float, dt: float, rng: np.random.Generator) -> np.ndarray:
+    """One control period of turbulence: the exact Ornstein-Uhlenbeck update of a gust (m/s, 3 axes),
+    ``g exp(-dt / tau) + sigma sqrt(1 - exp(-2 dt / tau)) N(0, 1)`` per axis with tau =
+    :data:`GUST_TIME_CONSTANT_S`, whose stationary standard deviation is ``sigma`` whatever ``dt``."""
+    decay = math.exp(-dt / GUST_TIME_CONSTANT_S)
+    return decay * np.asarray(gust, float) + rng.normal(size=3) * sigma_m_s * math.sqrt(1 - decay * decay)
+
+
 class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
     """Base class: one robot, estimated state, Box(-1, 1) actions, Dict or flat observations.
 
@@ -313,8 +325,12 @@ class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
         "_previous",
         "mean_current",
         "gust",
+        "episode_turbulence_m_s",
         "randomization_draw",
     )
+    # the turbulence (m/s): an Ornstein-Uhlenbeck gust on each axis about the episode's current, with
+    # this standard deviation (gust_step); none unless a task sets it or ``randomize`` draws it
+    turbulence_m_s: float = 0.0
 
     metadata: ClassVar[dict] = {
         "render_modes": ["rgb_array", *(["human"] if _has_display() else [])],
@@ -358,6 +374,9 @@ class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
         self.sim.track_estimate(self.robot)  # the observation's estimate, in MANUAL too
         self.randomization = self.options.randomization
         self.randomization_draw: dict = {}
+        self.mean_current = np.zeros(3)
+        self.gust = np.zeros(3)
+        self.episode_turbulence_m_s = self.turbulence_m_s
         self._steps = 0
         self._energy = self._contact_s = 0.0
         self.episode = EpisodeState()
@@ -380,8 +399,10 @@ class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
         episode (uses self.np_random); ``given`` holds the task's other reset options."""
 
     def _set_episode_current(self, current: np.ndarray) -> None:
-        """Hold the water current ``current`` (m/s, world frame) for the episode."""
-        self.sim.set_current(current)
+        """Hold the water current ``current`` (m/s, world frame) for the episode; the turbulence blows
+        about it."""
+        self.mean_current = np.asarray(current, float)
+        self.sim.set_current(self.mean_current + self.gust)
 
     def _reward(self, truth: dict) -> tuple[float, bool, dict]:
         """(reward, terminated, info) after one step."""
@@ -408,6 +429,11 @@ class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
         self.sim.reset(seed=int(self.np_random.integers(2**31 - 1)))
         self._steps = 0
         info = self._randomize_episode()
+        self.gust = np.zeros(3)
+        self.mean_current = np.asarray(self.sim.current, float)  # the scenario's, or the drawn one
+        self.episode_turbulence_m_s = float(
+            self.randomization_draw.get("turbulence_m_s", self.turbulence_m_s)
+        )
         current = chosen.pop("current", None)
         self._start_episode(**chosen)  # placing the robot restarts the simulation's estimator there
         if current is not None:
@@ -418,6 +444,7 @@ class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
     def _randomize_episode(self) -> dict:
         """Draw and apply this episode's randomisation (none without ``randomize``); reset's info."""
         if self.randomization is None:
+            self.randomization_draw = {}
             return {}
         self.randomization_draw = self.randomization.sample(self.np_random, self.vehicle.n_thrusters)
         randomization.apply(self.sim, self.robot, self.randomization_draw)
@@ -496,7 +523,13 @@ class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
         self._steps += 1
 
     def _before_substep(self) -> None:
-        """Hook for tasks that change the water while the episode runs."""
+        """Blow the turbulence for one control period (:func:`gust_step`) about the episode's current."""
+        if self.episode_turbulence_m_s <= 0:
+            return
+        self.gust = gust_step(
+            self.gust, self.episode_turbulence_m_s, self.scenario.control_period_s, self.np_random
+        )
+        self.sim.set_current(self.mean_current + self.gust)
 
     # ----- observations -------------------------------------------------------------------
     def _observation_spaces(self) -> dict[str, spaces.Space]:

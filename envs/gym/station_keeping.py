@@ -54,15 +54,14 @@ class StationKeepingEnv(PoseTargetEnv):
 
     ## Arguments
 
-    Those of ``MapTidal/GoToPose-v1``, and ``max_current_m_s=0.2``, ``turbulence_m_s=0.03``.
+    Those of ``MapTidal/GoToPose-v1``, and ``max_current_m_s=0.2``, ``turbulence_m_s=0.03`` (a
+    ``turbulence_m_s`` drawn by ``randomize`` replaces it for its episode).
 
     ## Version history
 
     - v1: a bounded, non-negative per-step reward; contacts cost per second and end nothing.
     - v0: first version (maptidal 0.1).
     """
-
-    GUST_TIME_CONSTANT_S = 2.0
 
     def __init__(self, *args, max_current_m_s: float = 0.2, turbulence_m_s: float = 0.03, **kwargs) -> None:
         if not (0 <= max_current_m_s <= 1.0 and math.isfinite(max_current_m_s)):
@@ -78,22 +77,7 @@ class StationKeepingEnv(PoseTargetEnv):
         self.target, self.target_yaw = target if target is not None else (start, yaw)
         heading = self.np_random.uniform(-math.pi, math.pi)
         speed = self.np_random.uniform(0.0, self.max_current_m_s)
-        self.mean_current = speed * np.array([math.cos(heading), math.sin(heading), 0.0])
-        self.gust = np.zeros(3)
-        self.sim.set_current(self.mean_current)
-
-    def _set_episode_current(self, current: np.ndarray) -> None:
-        self.mean_current = np.asarray(current, float)  # the turbulence blows about it
-        self.sim.set_current(self.mean_current + self.gust)
-
-    def _before_substep(self) -> None:
-        if self.turbulence_m_s <= 0:
-            return
-        dt = self.scenario.control_period_s
-        decay = math.exp(-dt / self.GUST_TIME_CONSTANT_S)
-        noise = self.np_random.normal(size=3) * self.turbulence_m_s * math.sqrt(1 - decay * decay)
-        self.gust = decay * self.gust + noise
-        self.sim.set_current(self.mean_current + self.gust)
+        self._set_episode_current(speed * np.array([math.cos(heading), math.sin(heading), 0.0]))
 
     def _reward(self, truth: dict) -> tuple[float, bool, dict]:
         distance, yaw_error, within = self._target_errors(truth)

@@ -22,6 +22,7 @@ from maptidal.envs.gym.core import (
     EpisodeLength,
     EpisodeState,
     Restorable,
+    gust_step,
 )
 from maptidal.envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
 from maptidal.envs.randomization import apply as apply_randomization
@@ -107,6 +108,9 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
         "_episode_start",
         "_controllers",
         "randomization_draw",
+        "_mean_current",
+        "_gust",
+        "_turbulence_m_s",
     )
 
     def __init__(
@@ -124,6 +128,8 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
         self._renderer = None
         self.tasks_mode = options.get("action") == "tasks"
         self.randomization_draw: dict = {}
+        # one water for the team: the drawn turbulence blows one gust about the one current (gust_step)
+        self._mean_current, self._gust, self._turbulence_m_s = np.zeros(3), np.zeros(3), 0.0
         self._steps_are_periods = not self.tasks_mode  # a task step lasts as long as its task (EpisodeLength)
         if self.tasks_mode:
             options = {**options, "action": "pilot"}
@@ -205,11 +211,14 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
                 name: randomization.sample(self.np_random, self.vehicle.n_thrusters) for name in self.agents
             }
             for draw in list(self.randomization_draw.values())[1:]:
-                for shared in ("current_m_s", "current_heading_rad", "turbidity"):
+                for shared in ("current_m_s", "current_heading_rad", "turbidity", "turbulence_m_s"):
                     draw.pop(shared, None)
             for name, draw in self.randomization_draw.items():
                 apply_randomization(self.sim, name, draw)
             info = {"randomization": copy.deepcopy(self.randomization_draw)}
+        first = self.randomization_draw.get(self.agents[0], {}) if randomization is not None else {}
+        self._mean_current, self._gust = self.sim.current, np.zeros(3)
+        self._turbulence_m_s = float(first.get("turbulence_m_s", 0.0))
         low, high = SAFE_BOX
         placed: list[np.ndarray] = []
         for name in self.agents:
@@ -249,6 +258,7 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
         mode = "thrusters" if self.options.action == "thrusters" else "pilot"
         energy, touching = 0.0, 0
         for _ in range(self.substeps):
+            self._blow()
             self.sim.step(commands, mode=mode)
             for name in self.agents:
                 energy += float(np.mean(self.sim.thruster_outputs(name) ** 2))
@@ -261,6 +271,13 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
         truncated = self._out_of_steps(self._steps)
         info = {"new_voxels": new, "coverage": float(self.seen.mean()), "contact_s": contact_s}
         return self._observation(), float(reward), False, bool(truncated), info
+
+    def _blow(self) -> None:
+        """One control period of the drawn turbulence, about the episode's current."""
+        if self._turbulence_m_s > 0:
+            period = self.scenario.control_period_s
+            self._gust = gust_step(self._gust, self._turbulence_m_s, period, self.np_random)
+            self.sim.set_current(self._mean_current + self._gust)
 
     def _fly_tasks(self, action):
         chosen = {}
@@ -290,6 +307,7 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
                 commands[name], now = executors[name].update(self.sim.estimate(name), period)
                 if status[name] not in ("capture", "timeout"):
                     status[name] = now
+            self._blow()
             self.sim.step(commands)
             if self.sim.contacts():
                 collided, contact_s = True, contact_s + period
