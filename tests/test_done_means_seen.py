@@ -59,7 +59,9 @@ def test_a_lying_estimator_claims_tasks_the_evaluation_does_not_count(tmp_path, 
     """rov0's estimate is 0.4 m off in x (it believes it is where it is not): it says its tasks are done,
     the true views miss them, and they neither count as verified nor enter the coverage."""
     scenario, _ = load_mission(None)
-    mission = Mission(scenario, MissionParams(duration_s=45.0, seed=3, perception_process=False), tmp_path)
+    mission = Mission(
+        scenario, MissionParams(duration_s=45.0, seed=3, perception_process=False, plots=False), tmp_path
+    )
     honest = Mission._estimate
 
     def lying(self, robot):
@@ -84,7 +86,12 @@ def test_a_vehicle_that_cannot_pitch_declines_pitched_views_and_never_marks_them
     document = Mission(
         scenario,
         MissionParams(
-            duration_s=45.0, seed=3, max_pitch_deg=0.0, discovery_mode="paper", perception_process=False
+            duration_s=45.0,
+            seed=3,
+            max_pitch_deg=0.0,
+            discovery_mode="paper",
+            perception_process=False,
+            plots=False,
         ),
         tmp_path,
     ).run()

@@ -44,7 +44,9 @@ def _fly(mode: str, out, duration_s: float = 40.0, apart: bool = True) -> tuple[
         run_module.reachable = _never
     mission = Mission(
         scenario,
-        MissionParams(duration_s=duration_s, seed=1, discovery_mode=mode, perception_process=apart),
+        MissionParams(
+            duration_s=duration_s, seed=1, discovery_mode=mode, perception_process=apart, plots=False
+        ),
         out,
     )
     real_tank = scenario.tank

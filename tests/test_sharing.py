@@ -172,7 +172,7 @@ def failure_mission(tmp_path_factory):
     scenario, params = prepare_mission(
         "assets/scenarios/failure.toml", duration_s=120.0, seed=0, discovery="paper"
     )
-    params = dataclasses.replace(params, perception_process=False)  # as in a worker, without its start
+    params = dataclasses.replace(params, perception_process=False, plots=False)  # as in a worker
     out = tmp_path_factory.mktemp("failure")
     return Mission(scenario, params, out).run(), out
 

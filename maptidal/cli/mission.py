@@ -67,6 +67,11 @@ def register(commands) -> None:
         help="also write mission.mp4: a camera behind the team with each robot's view inset, two frames "
         "per simulated second played at 20 fps",
     )
+    run.add_argument(
+        "--no-plots",
+        action="store_true",
+        help="leave out the PNG plots at the end (some 3 s); `maptidal report DIR` draws them later",
+    )
     add_output_folder(run, "runs/mission")
     run.set_defaults(handler=run_mission)
 
@@ -117,6 +122,12 @@ def register(commands) -> None:
         choices=("map-aware", "paper"),
         help="the maptidal planner's discovery mode (default: the scenario's, else map-aware)",
     )
+    batch.add_argument(
+        "--no-plots",
+        action="store_true",
+        help="leave out each mission's own PNG plots (the batch still draws its figures); `maptidal "
+        "report` on a seed's folder draws them later",
+    )
     add_executor_args(batch, "missions")
     add_output_folder(batch, "runs/batch")
     batch.set_defaults(handler=run_batch_command)
@@ -140,6 +151,8 @@ def run_mission(args: argparse.Namespace) -> int:
     )
     if args.video:
         params = dataclasses.replace(params, video=True)
+    if args.no_plots:
+        params = dataclasses.replace(params, plots=False)
     mission = Mission(scenario, params, args.out)
     if mission.writer.cleared:
         print(
@@ -201,8 +214,9 @@ def run_batch_command(args: argparse.Namespace) -> int:
         pose_source=args.pose,
         planners=planners,
         discovery=args.discovery,
+        plots=not args.no_plots,
     )
     several = planners is not None and len(planners) > 1
     print(planners_markdown(summary, len(seeds)) if several else batch_markdown(summary, len(rows)))
-    print(f"files in {args.out}: batch.csv, batch.json, batch.md, batch.png, seed_NNN/")
+    print(f"files in {args.out}: batch.csv, batch.json, batch.md, batch.png, coverage_time.png, seed_NNN/")
     return 0

@@ -25,6 +25,7 @@ left out of every comparison.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import math
 import re
@@ -83,6 +84,7 @@ class BatchRun:
     pose_source: str | None = None
     planner: str | None = None
     discovery: str | None = None
+    plots: bool = True
 
 
 def parse_planners(text: str) -> list[str]:
@@ -130,6 +132,8 @@ def run_one(run: BatchRun) -> dict:
         planner=run.planner,
         discovery=run.discovery,
     )
+    if not run.plots:
+        params = dataclasses.replace(params, plots=False)
     document = Mission(scenario, params, run.out_dir).run()
     folder = Path(run.out_dir)
     name = folder.name if run.planner is None else f"{folder.parent.name}/{folder.name}"
@@ -337,9 +341,11 @@ def run_batch(
     progress: bool = True,
     planners: list[str] | None = None,
     discovery: str | None = None,
+    plots: bool = True,
 ) -> tuple[list[dict], dict]:
     """Fly a mission per seed (module docstring), or per planner and seed; returns the rows in order
-    (planner, then seed) and the aggregate (one per planner with several planners).
+    (planner, then seed) and the aggregate (one per planner with several planners). ``plots=False``
+    leaves out each mission's own PNG plots.
 
     The mission file is checked here, before any run starts, so a bad one fails at once."""
     from maptidal.mission.config import prepare_mission
@@ -361,6 +367,7 @@ def run_batch(
             pose_source,
             planner,
             discovery,
+            plots,
         )
         for planner in planners or [None]
         for seed in seeds

@@ -97,16 +97,21 @@ class MissionWriter:
         """Replace ``mission.json`` atomically."""
         atomic_write_json(self.root / "mission.json", document)
 
-    def finish(self, document: dict, views: np.ndarray, view_times: np.ndarray, tank) -> dict:
+    def finish(
+        self, document: dict, views: np.ndarray, view_times: np.ndarray, tank, plots: bool = True
+    ) -> dict:
         """Add the coverage of the captured views (``view_times``: when each was captured), write
-        ``mission.json``, the plots and ``report.md``."""
+        ``mission.json``, the plots (unless ``plots`` is False: ``report.md`` then says how to draw
+        them) and ``report.md``."""
         self._events.close()
         self._trajectories.close()
         document["coverage"], occluded = coverage_of(views, tank)
         document["coverage_timeline"] = coverage_timeline(views, view_times, tank)
         document["localisation"] = localisation_errors(self.root, list(document.get("robots", {})))
+        document["plots"] = plots
         atomic_write_json(self.root / "mission.json", document)
-        write_plots(self.root, document, views, tank, occluded)
+        if plots:
+            write_plots(self.root, document, views, tank, occluded)
         atomic_write_text(self.root / "report.md", report_markdown(document))
         return document
 
@@ -344,7 +349,8 @@ def localisation_lines(document: dict) -> list[str]:
         )
         rows.append(f"| {name} | {cells} |")
     note = "Horizontal error of the estimate each robot flew on, against the truth."
-    return ["## Localisation", "", note, "", *rows, "", "![localisation](localisation.png)", ""]
+    figure = ["![localisation](localisation.png)", ""] if document.get("plots", True) else []
+    return ["## Localisation", "", note, "", *rows, "", *figure]
 
 
 def _trajectory_rows(root: Path) -> np.ndarray:
@@ -424,16 +430,22 @@ def report_markdown(document: dict) -> str:
         *sharing_lines(document),
         *localisation_lines(document),
         *timing_lines(document),
-        "![top view](top_view.png)",
-        "",
-        "![timeline](timeline.png)",
-        "",
-        "![coverage against time](coverage_time.png)",
-        "",
-        "![histogram](histogram.png)",
-        "",
-        "![views per voxel](voxel_views.png)",
-        "",
+        *(
+            [
+                "![top view](top_view.png)",
+                "",
+                "![timeline](timeline.png)",
+                "",
+                "![coverage against time](coverage_time.png)",
+                "",
+                "![histogram](histogram.png)",
+                "",
+                "![views per voxel](voxel_views.png)",
+                "",
+            ]
+            if document.get("plots", True)
+            else ["Flown with `--no-plots`: `maptidal report` on this folder draws the plots.", ""]
+        ),
     ]
     return "\n".join(lines)
 
@@ -664,6 +676,7 @@ def rebuild(root, tank) -> dict:
     views_array = np.array(views).reshape(-1, 6)
     document["coverage"], occluded = coverage_of(views_array, tank)
     document["coverage_timeline"] = coverage_timeline(views_array, np.array(view_times), tank)
+    document["plots"] = True
     document["localisation"] = localisation_errors(root, list(document["robots"]))
     atomic_write_json(root / "mission.json", document)
     write_plots(root, document, views_array, tank, occluded)

@@ -205,6 +205,10 @@ class MissionParams:
     # --video: an MP4 from a camera behind the team, each robot's latest view inset; two frames per
     # simulated second, played at 20 fps (ten times real time)
     video: bool = False
+    # the PNG plots at the end (top view, timeline, coverage against time, histogram, views per voxel,
+    # localisation): some 3 s of matplotlib a mission; --no-plots leaves them out (a batch of many seeds
+    # draws its own figures), and `maptidal report` draws them later from the folder
+    plots: bool = True
     video_size: tuple[int, int] = (640, 400)
     video_frames_per_sim_s: float = 2.0
     video_playback_fps: float = 20.0
@@ -811,7 +815,9 @@ class Mission:
         document = self.document(now, time.perf_counter() - wall_start, finished=finished)
         if self.video is not None:
             document["video"] = {"file": self.video.path.name, "frames": self.video.frames}
-        self.writer.finish(document, self.captured_views(), np.array(self.captured_at), self.scenario.tank)
+        self.writer.finish(
+            document, self.captured_views(), np.array(self.captured_at), self.scenario.tank, self.params.plots
+        )
         return document
 
     def _poses(self, robot: _Robot) -> dict:
