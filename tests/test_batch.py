@@ -179,7 +179,7 @@ def _rows(folder: Path) -> list[dict]:
 
 
 def test_a_batch_gives_the_same_numbers_locally_and_on_ray(tmp_path, ray_cluster):
-    common = ["batch", "--seeds", "1-2", "--duration", "15", "--jobs", "2"]
+    common = ["batch", "--seeds", "1-2", "--duration", "15", "--jobs", "2", "--no-plots"]
     local = run_maptidal(*common, "--out", tmp_path / "local")
     assert local.returncode == 0, local.stderr
     on_ray = run_maptidal(

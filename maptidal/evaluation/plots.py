@@ -28,6 +28,18 @@ def _save(figure, path: str | os.PathLike) -> None:
     save_png(figure, path)
 
 
+def finish_coverage_time(figure, axis, path: str | os.PathLike, legend_size: int = 8) -> None:
+    """Finish and save a plot of the walls' inspected share (%) against simulated time: the 95 % mark,
+    the labels, 0 to 100 %, the legend."""
+    axis.axhline(95.0, color="0.5", ls="--", lw=0.8, label="95 %")
+    axis.set_xlabel("simulated time (s)")
+    axis.set_ylabel("inspected (%, occlusion on)")
+    axis.set_ylim(0, 100)
+    axis.legend(fontsize=legend_size, loc="lower right")
+    figure.tight_layout()
+    save_png(figure, path)
+
+
 def plot_histograms(reports: dict[str, CoverageReport], path: str | os.PathLike, title: str = "") -> None:
     """Normalised views per voxel of each method beside the ideal gamma bins (Fig. 8)."""
     last_bin = max(len(r.histogram) for r in reports.values()) - 1

@@ -304,6 +304,8 @@ def plot_coverage_bands(rows: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from maptidal.evaluation.plots import finish_coverage_time
+
     end = max(float(row["completion_time_s"]) for row in rows)
     grid = np.linspace(0.0, max(end, 1.0), 400)
     figure, axis = plt.subplots(figsize=(8, 4))
@@ -317,15 +319,9 @@ def plot_coverage_bands(rows: list[dict], path: Path) -> None:
             alpha=0.15,
             lw=0,
         )
-    axis.axhline(95.0, color="0.5", ls="--", lw=0.8, label="95 %")
     runs = len({row["seed"] for row in rows})
     axis.set_title(f"Walls inspected against time, {runs} seeds (line: mean, band: one std)")
-    axis.set_xlabel("simulated time (s)")
-    axis.set_ylabel("inspected (%, occlusion on)")
-    axis.set_ylim(0, 100)
-    axis.legend(fontsize=8, loc="lower right")
-    figure.tight_layout()
-    save_png(figure, path)
+    finish_coverage_time(figure, axis, path)
 
 
 def run_batch(

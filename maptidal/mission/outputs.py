@@ -296,22 +296,18 @@ def plot_coverage_time(document: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from maptidal.evaluation.plots import finish_coverage_time
+
     timeline = np.array(document.get("coverage_timeline", [[0.0, 0.0]]), float).reshape(-1, 2)
     end = max(float(document.get("sim_time_s", 0.0)), float(timeline[-1, 0]))
     figure, axis = plt.subplots(figsize=(8, 3))
     axis.step(np.r_[timeline[:, 0], end], np.r_[timeline[:, 1], timeline[-1, 1]], where="post", lw=1.5)
-    axis.axhline(95.0, color="0.5", ls="--", lw=0.8, label="95 %")
     reached = time_to_coverage(timeline.tolist(), 95.0)
     axis.set_title(
         "Walls inspected by the scored views (occlusion on): "
         + (f"95 % at {reached:.0f} s" if reached is not None else f"{timeline[-1, 1]:.0f} % at the end")
     )
-    axis.set_xlabel("simulated time (s)")
-    axis.set_ylabel("inspected (%)")
-    axis.set_ylim(0, 100)
-    axis.legend(fontsize=7, loc="lower right")
-    figure.tight_layout()
-    save_png(figure, path)
+    finish_coverage_time(figure, axis, path, legend_size=7)
 
 
 def localisation_errors(root, robots: list[str]) -> dict:
