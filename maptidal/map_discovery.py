@@ -167,17 +167,29 @@ def fit_planes(
     if len(map_points) == 0 or len(centres) == 0:
         return out_centroid, out_normal, out_variation, support
     tree = tree or cKDTree(map_points)
-    for row, neighbours in enumerate(tree.query_ball_point(centres, radius)):
-        support[row] = len(neighbours)
-        if len(neighbours) < min_support:
-            continue
-        local = map_points[neighbours]
-        centroid = local.mean(axis=0)
-        values, vectors = np.linalg.eigh(np.cov((local - centroid).T, bias=True))
-        total = float(values.sum())
-        out_centroid[row] = centroid
-        out_normal[row] = vectors[:, 0]
-        out_variation[row] = max(float(values[0]), 0.0) / total if total > 0 else np.nan
+    neighbours = tree.query_ball_point(centres, radius)
+    support[:] = [len(found) for found in neighbours]
+    rows = np.flatnonzero(support >= min_support)
+    if len(rows) == 0:
+        return out_centroid, out_normal, out_variation, support
+    # every fit at once: each neighbour tagged with its fit, its offset from that fit's centre (small
+    # numbers, so the moments lose no precision), then the moments by bincount and one stacked eigh
+    owner = np.repeat(np.arange(len(rows)), support[rows])
+    index = np.concatenate([neighbours[row] for row in rows]).astype(np.intp)
+    offsets = map_points[index] - centres[rows][owner]
+    count = support[rows].astype(float)
+    mean = np.stack([np.bincount(owner, offsets[:, k], len(rows)) for k in range(3)], axis=1) / count[:, None]
+    covariance = np.empty((len(rows), 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            moment = np.bincount(owner, offsets[:, i] * offsets[:, j], len(rows)) / count
+            covariance[:, i, j] = covariance[:, j, i] = moment - mean[:, i] * mean[:, j]
+    values, vectors = np.linalg.eigh(covariance)
+    total = values.sum(axis=1)
+    out_centroid[rows] = centres[rows] + mean
+    out_normal[rows] = vectors[:, :, 0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out_variation[rows] = np.where(total > 0, np.maximum(values[:, 0], 0.0) / total, np.nan)
     return out_centroid, out_normal, out_variation, support
 
 

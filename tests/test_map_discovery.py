@@ -82,6 +82,28 @@ def test_a_crease_between_two_planes_is_not_flat():
     assert variation[0] > MapAwareParams().max_surface_variation
 
 
+def test_the_fits_at_once_are_each_neighbourhoods_own_fit():
+    """Every fit of a cloud far from the origin, against a literal one: the neighbours by brute-force
+    distance, numpy's covariance about their mean, and its smallest eigenvector, one centre at a time."""
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(600, 3)) * [0.6, 0.6, 0.05] + [40.0, -25.0, 3.0]
+    centres = points[rng.choice(len(points), 80, replace=False)] + rng.normal(scale=0.05, size=(80, 3))
+    centroid, normal, variation, support = fit_planes(points, centres, 0.3, 8)
+    fitted = 0
+    for row, centre in enumerate(centres):
+        local = points[np.linalg.norm(points - centre, axis=1) <= 0.3]
+        assert support[row] == len(local)
+        if len(local) < 8:
+            assert np.isnan(variation[row])
+            continue
+        values, vectors = np.linalg.eigh(np.cov(local.T, bias=True))
+        np.testing.assert_allclose(centroid[row], local.mean(axis=0), atol=1e-9)
+        assert abs(float(normal[row] @ vectors[:, 0])) == pytest.approx(1.0, abs=1e-9)
+        assert variation[row] == pytest.approx(values[0] / values.sum(), abs=1e-9)
+        fitted += 1
+    assert fitted > 40
+
+
 def test_too_few_points_give_no_fit():
     _, normal, variation, support = fit_planes(np.eye(3), [[0, 0, 0]], 2.0, 8)
     assert support[0] == 3 and np.isnan(normal).all() and np.isnan(variation[0])
