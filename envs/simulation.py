@@ -125,10 +125,13 @@ class Odometry:
     travelled (m: a polyline through its positions, a vertex whenever it is :data:`PATH_STEP_M` from the
     last, so a few mm of bobbing adds nothing; a teleport by :meth:`Simulation.place` adds nothing) and
     the electrical energy its thrusters drew (J: each thruster's power at its lagged thrust,
-    :class:`maptidal.controllers.thrusters.ThrusterPower`, times the time stepped)."""
+    :class:`maptidal.controllers.thrusters.ThrusterPower`, times the time stepped), and the time it
+    spent touching the tank or a teammate (s, counted a control period at a time)."""
 
     path_m: float = 0.0
     thruster_energy_j: float = 0.0
+    # the time its hull touched the tank or a teammate (s): what a collision costs, seen
+    contact_s: float = 0.0
     # the path's last vertex (None: the next position starts the path)
     last_vertex: tuple[float, float, float] | None = field(default=None, repr=False, compare=False)
 
@@ -622,7 +625,9 @@ class Simulation:
 
     def _count_odometry(self, seconds: float) -> None:
         # the thrust at the period's end stands for the period: it lags its command by 0.1 s, five
-        # control periods, so it barely moves within one
+        # control periods, so it barely moves within one; so does a contact
+        for robot in self._robots_touching() if self.data.ncon else ():
+            self._odometry[robot].contact_s += seconds
         for robot, slot in self._slots.items():
             odometry = self._odometry[robot]
             adr = self._position_adr[robot]
@@ -631,8 +636,20 @@ class Simulation:
             act = self.data.act[slot.act_adr : slot.act_adr + n].tolist()
             odometry.thruster_energy_j += self._plants[robot].thruster.power_w(act) * seconds
 
+    def _robots_touching(self) -> set[str]:
+        """The robots whose hull touches anything now (both robots of a robot-robot contact)."""
+        robot_of_body = {slot.body_id: name for name, slot in self._slots.items()}
+        touching = set()
+        for k in range(self.data.ncon):
+            contact = self.data.contact[k]
+            for geom in (contact.geom1, contact.geom2):
+                robot = robot_of_body.get(int(self.model.geom_bodyid[geom]))
+                if robot is not None:
+                    touching.add(robot)
+        return touching
+
     def odometry(self, robot: str) -> Odometry:
-        """``robot``'s distance travelled and thruster energy since the reset (a copy)."""
+        """``robot``'s distance travelled, thruster energy and time in contact since the reset (a copy)."""
         return copy.copy(self._odometry[self._check(robot)])
 
     def _instability_warnings(self) -> int:

@@ -798,8 +798,10 @@ def test_each_robot_s_odometry_follows_its_trajectory(short_mission):
         assert abs(odometry["path_m"] - coarse) <= 0.25 * coarse + 0.2, (odometry["path_m"], coarse)
         mean_power_w = odometry["thruster_energy_j"] / document["sim_time_s"]
         assert 1.0 < mean_power_w < 8 * 380.0
+        assert 0.0 <= odometry["contact_s"] <= document["sim_time_s"]
     metrics = mission_metrics(document)
     assert metrics["path_m"] == pytest.approx(sum(o["path_m"] for o in document["odometry"].values()))
+    assert metrics["contact_s"] == pytest.approx(sum(o["contact_s"] for o in document["odometry"].values()))
     assert metrics["thruster_energy_kj"] == pytest.approx(
         sum(o["thruster_energy_j"] for o in document["odometry"].values()) / 1000.0
     )

@@ -134,6 +134,33 @@ def test_the_path_leaves_out_bobbing_and_counts_slow_travel():
     assert 1.0 - PATH_STEP_M - 0.02 <= odometry.path_m <= 1.0 + 0.02
 
 
+def test_the_contact_time_is_the_time_the_hull_touches_something():
+    """Hovering free, no contact time; pushed down onto the floor, the periods in which the simulator's
+    contact list names the robot, times the period."""
+    sim = open_water_sim(16.0)
+    period = sim.scenario.control_period_s
+    for _ in range(50):
+        sim.step({"rov": np.zeros(8)}, mode="thrusters")
+    assert sim.odometry("rov").contact_s == 0.0
+    sim.place("rov", (-15.0, 0.0, 0.3))
+    touching = 0
+    for _ in range(150):  # 3 s pushing down
+        sim.step({"rov": {"heave": -0.6}})
+        touching += any(contact.robot == "rov" for contact in sim.contacts())
+    assert touching > 50
+    assert sim.odometry("rov").contact_s == pytest.approx(touching * period, abs=1e-9)
+
+
+def test_two_robots_that_touch_both_count_it():
+    vehicle = load_vehicle("heavy")
+    robots = (RobotSpec("a", vehicle, START), RobotSpec("b", vehicle, (START[0] + 0.3, START[1], START[2])))
+    sim = Simulation(Scenario("open", OPEN_WATER, robots))
+    sim.reset(seed=3)
+    sim.step({"a": np.zeros(8), "b": np.zeros(8)}, mode="thrusters")  # overlapping: pushed apart
+    assert any({contact.robot, contact.other} == {"a", "b"} for contact in sim.contacts())
+    assert sim.odometry("a").contact_s > 0 and sim.odometry("a").contact_s == sim.odometry("b").contact_s
+
+
 def test_the_odometry_is_part_of_the_saved_state():
     sim = open_water_sim(16.0)
     for _ in range(20):

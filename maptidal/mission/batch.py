@@ -51,6 +51,7 @@ METRICS = {
     "time_to_95_s": "s to 95 % of the walls inspected (seeds that reached it)",
     "path_m": "m travelled, the team's",
     "thruster_energy_kj": "kJ drawn by the team's thrusters (T200 power law)",
+    "contact_s": "robot-seconds touching the tank or a teammate",
     "messages": "messages",
     "bytes": "bytes",
     "lost": "messages lost",

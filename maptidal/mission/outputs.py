@@ -390,6 +390,12 @@ def mission_metrics(document: dict) -> dict:
         "time_to_95_s": time_to_coverage(document.get("coverage_timeline", []), 95.0),
         "path_m": path_m,  # the team's, summed over robots
         "thruster_energy_kj": energy_kj,
+        # robot-seconds touching the tank or a teammate (a collision of two robots counts for both)
+        "contact_s": (
+            None
+            if not document.get("odometry")
+            else float(sum(row.get("contact_s", 0.0) for row in document["odometry"].values()))
+        ),
         "messages": None if comms is None else int(comms.get("messages", 0)),
         "bytes": None if comms is None else int(comms.get("bytes", 0)),
         "lost": None if comms is None else int(comms.get("lost", 0)),
@@ -578,6 +584,10 @@ def summary_table(document: dict) -> str:
         (
             "95 % of the walls inspected at",
             "not reached" if m["time_to_95_s"] is None else f"{m['time_to_95_s']:.1f} s",
+        ),
+        (
+            "robot-seconds in contact (tank or teammate)",
+            "unknown" if m["contact_s"] is None else f"{m['contact_s']:.1f} s",
         ),
         (
             "path / thruster energy (team)",

@@ -1167,9 +1167,13 @@ class Mission:
             "wall_time_s": wall_s,
             "robots": {r.name: r.activity for r in self.robots.values()},
             "inspected_pct": self.inspected_pct(),
-            # each robot's distance travelled and thruster energy, measured on the simulated truth
+            # each robot's distance travelled, thruster energy and time in contact, on the simulated truth
             "odometry": {
-                name: {"path_m": odometry.path_m, "thruster_energy_j": odometry.thruster_energy_j}
+                name: {
+                    "path_m": odometry.path_m,
+                    "thruster_energy_j": odometry.thruster_energy_j,
+                    "contact_s": odometry.contact_s,
+                }
                 for name in self.robots
                 for odometry in (self.sim.odometry(name),)
             },
