@@ -47,10 +47,9 @@ a = 1.610, c = 0.669 forward and a = 1.679, c = 0.790 reverse: mean error 2 %, a
 transcribed in ``tests/data``).
 The law is used at every voltage: at a given bollard thrust the propeller, not the supply, sets the
 power, to first order. At 16 V it predicts 380 W (23.7 A) at full forward thrust (51.4 N).
-Not modelled: the electronics' idle draw, and power changing with inflow speed.
 
-Not modelled: thrust falling with inflow speed (the data is bollard pull), battery sag, and the
-interaction of neighbouring thrusters.
+Not modelled: thrust and power changing with inflow speed (the data is bollard pull), battery sag,
+the interaction of neighbouring thrusters, and the electronics' idle draw.
 """
 
 from __future__ import annotations

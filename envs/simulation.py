@@ -238,6 +238,7 @@ class Simulation:
         self._estimators: dict[str, DeadReckoning] = {}
         self._readings: dict[str, dict] = {}
         self._odometry: dict[str, Odometry] = {}
+        self._robot_of_body = {slot.body_id: name for name, slot in self._slots.items()}
         # where each robot's position lies in qpos (its free joint's), read for the odometry: xpos lags
         # qpos by a physics step after mj_step, and set_state recomputes it
         self._position_adr = {
@@ -638,12 +639,11 @@ class Simulation:
 
     def _robots_touching(self) -> set[str]:
         """The robots whose hull touches anything now (both robots of a robot-robot contact)."""
-        robot_of_body = {slot.body_id: name for name, slot in self._slots.items()}
         touching = set()
         for k in range(self.data.ncon):
             contact = self.data.contact[k]
             for geom in (contact.geom1, contact.geom2):
-                robot = robot_of_body.get(int(self.model.geom_bodyid[geom]))
+                robot = self._robot_of_body.get(int(self.model.geom_bodyid[geom]))
                 if robot is not None:
                     touching.add(robot)
         return touching
@@ -687,7 +687,7 @@ class Simulation:
     def contacts(self) -> list[Contact]:
         """Current contacts that involve a robot, with the normal force."""
         found = []
-        bodies = {slot.body_id: name for name, slot in self._slots.items()}
+        bodies = self._robot_of_body
         force = np.zeros(6)
         for k in range(self.data.ncon):
             contact = self.data.contact[k]

@@ -157,15 +157,19 @@ def time_to_coverage(timeline: list[list[float]], pct: float) -> float | None:
     return next((t for t, covered in timeline if covered >= pct - 1e-9), None)
 
 
-def team_odometry(document: dict) -> tuple[float | None, float | None]:
-    """The team's distance travelled (m) and thruster energy (kJ), summed over the robots' odometry
-    (None, None for a document without it)."""
+def team_odometry(document: dict) -> dict[str, float | None]:
+    """The team's distance travelled (``path_m``), thruster energy (``thruster_energy_kj``) and
+    robot-seconds in contact with the tank or a teammate (``contact_s``; a collision of two robots
+    counts for both), summed over the robots' odometry; None each for a document without it."""
     odometry = document.get("odometry")
     if not odometry:
-        return None, None
-    path = sum(row["path_m"] for row in odometry.values())
-    energy = sum(row["thruster_energy_j"] for row in odometry.values()) / 1000.0
-    return float(path), float(energy)
+        return dict.fromkeys(("path_m", "thruster_energy_kj", "contact_s"))
+    rows = odometry.values()
+    return {
+        "path_m": float(sum(row["path_m"] for row in rows)),
+        "thruster_energy_kj": float(sum(row["thruster_energy_j"] for row in rows)) / 1000.0,
+        "contact_s": float(sum(row.get("contact_s", 0.0) for row in rows)),
+    }
 
 
 def read_events(root) -> list[dict]:
@@ -375,7 +379,6 @@ def mission_metrics(document: dict) -> dict:
     tasks = document.get("tasks", [])
     coverage = document.get("coverage", {}).get("occluded", {})
     comms = document.get("comms")  # None: unknown (a log rebuilt without a readable snapshot)
-    path_m, energy_kj = team_odometry(document)
     return {
         "finished": bool(document.get("finished")),
         "tasks_found": len(tasks),
@@ -388,14 +391,7 @@ def mission_metrics(document: dict) -> dict:
         "completion_time_s": float(document.get("sim_time_s", 0.0)),
         # the first time the scored views had seen 95 % of the walls (None: never)
         "time_to_95_s": time_to_coverage(document.get("coverage_timeline", []), 95.0),
-        "path_m": path_m,  # the team's, summed over robots
-        "thruster_energy_kj": energy_kj,
-        # robot-seconds touching the tank or a teammate (a collision of two robots counts for both)
-        "contact_s": (
-            None
-            if not document.get("odometry")
-            else float(sum(row.get("contact_s", 0.0) for row in document["odometry"].values()))
-        ),
+        **team_odometry(document),  # path_m, thruster_energy_kj, contact_s
         "messages": None if comms is None else int(comms.get("messages", 0)),
         "bytes": None if comms is None else int(comms.get("bytes", 0)),
         "lost": None if comms is None else int(comms.get("lost", 0)),
