@@ -211,6 +211,39 @@ def test_a_signal_during_an_import_waits_for_the_import_to_end():
     assert signal.getsignal(signal.SIGINT) is before  # the handlers are put back
 
 
+def test_a_signal_at_the_end_of_an_import_is_not_raised_again_while_the_line_is_printed():
+    # the race CI met once: SIGINT in the last 20 ms of the imports, the import ends before the retry,
+    # the command sees ``received`` and prints its line; the pending retry must not raise in the middle
+    import importlib
+    import textwrap
+
+    folder = Path(__import__("tempfile").mkdtemp())
+    (folder / "last_moment_module_for_signals.py").write_text(
+        textwrap.dedent(
+            """
+            import os, signal
+            os.kill(os.getpid(), signal.SIGINT)  # the handler runs here, inside the import: a retry is set
+            """
+        )
+    )
+    sys.path.insert(0, str(folder))
+    before = signal.getsignal(signal.SIGINT)
+    try:
+        with Interrupts() as interrupts:
+            importlib.import_module("last_moment_module_for_signals")  # ends well inside the 20 ms
+            assert interrupts.received == signal.SIGINT
+            line = interrupts.message("maptidal sweep")
+            try:
+                time.sleep(0.1)  # five retry periods: a pending retry would raise KeyboardInterrupt here
+            except KeyboardInterrupt:
+                pytest.fail("the retry raised KeyboardInterrupt after the command had printed its line")
+    finally:
+        sys.path.remove(str(folder))
+        sys.modules.pop("last_moment_module_for_signals", None)
+    assert line == "maptidal sweep: interrupted; files written so far are complete"
+    assert signal.getsignal(signal.SIGINT) is before
+
+
 def test_bad_moments_are_imports_and_starting_a_child():
     import inspect
 

@@ -53,6 +53,7 @@ class Interrupts:
 
     def __init__(self) -> None:
         self.received: int | None = None
+        self._settled = False  # the command is saying so: a retry still pending must not raise any more
         self._previous: dict[int, object] = {}
 
     def __enter__(self) -> Interrupts:
@@ -76,6 +77,8 @@ class Interrupts:
         self._raise_when_safe(frame)
 
     def _raise_when_safe(self, frame) -> None:
+        if self._settled:
+            return
         if at_a_bad_moment(frame):
             signal.signal(signal.SIGALRM, lambda _number, later: self._raise_when_safe(later))
             signal.setitimer(signal.ITIMER_REAL, RETRY_S)
@@ -87,8 +90,18 @@ class Interrupts:
         """The exit status: 143 after SIGTERM, else 130 (SIGINT, or a KeyboardInterrupt from elsewhere)."""
         return EXIT_TERMINATED if self.received == signal.SIGTERM else EXIT_INTERRUPTED
 
+    def settle(self) -> None:
+        """The command has seen the signal and is ending: cancel a KeyboardInterrupt still waiting for a
+        safe moment. (A signal during the last 20 ms of the imports used to raise it again in the middle
+        of printing the one line, a traceback after all.)"""
+        self._settled = True
+        if self._previous:
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+
     def message(self, prefix: str, hint: str = "") -> str:
-        """The one line to print: what ended the command, that its files are complete, and ``hint``."""
+        """The one line to print: what ended the command, that its files are complete, and ``hint``.
+        Asking for it settles the signal (:meth:`settle`)."""
+        self.settle()
         what = "terminated (SIGTERM)" if self.received == signal.SIGTERM else "interrupted"
         return f"{prefix}: {what}; files written so far are complete{hint}"
 
