@@ -154,6 +154,15 @@ def _range(key: str, value: object) -> tuple[float, float]:
     return low, high
 
 
+def restore_sensor_noise(sim) -> None:
+    """Give every robot of ``sim`` the scenario's sensor noise again. Called before ``sim.reset``, which
+    draws the IMU biases at the robots' noise levels: otherwise an episode's start would depend on the
+    last episode's draw (a reused environment and a fresh one, reset with one seed, started 0.5 mm
+    apart)."""
+    for robot in sim.robots:
+        sim.set_sensor_noise(robot, sim.scenario.noise)
+
+
 def apply(sim, robot: str, draw: Mapping[str, object]) -> None:
     """Give ``robot`` of ``sim`` (a :class:`maptidal.envs.simulation.Simulation`, just reset) the drawn
     plant, sensor noise, water and current; keys not drawn keep the scenario's values. The turbulence is
@@ -196,7 +205,8 @@ def apply(sim, robot: str, draw: Mapping[str, object]) -> None:
     if "noise_scale" in draw:
         scale, noise = float(draw["noise_scale"]), sim.scenario.noise
         scaled = {f.name: getattr(noise, f.name) * scale for f in dataclasses.fields(noise)}
-        sim.set_sensor_noise(robot, dataclasses.replace(noise, **scaled))
+        # the biases drawn at the reset, at the scenario's levels (restore_sensor_noise), scaled with them
+        sim.set_sensor_noise(robot, dataclasses.replace(noise, **scaled), rescale_biases=True)
     if "turbidity" in draw:
         sim.set_water(dataclasses.replace(sim.scenario.water, turbidity=float(draw["turbidity"])))
     if "current_m_s" in draw:

@@ -434,9 +434,18 @@ class Simulation:
             # change: set_state puts every plant back, and a rollout may restore a state often
             mujoco.mj_setConst(self.model, mujoco.MjData(self.model))
 
-    def set_sensor_noise(self, robot: str, noise: SensorNoise) -> None:
-        """``robot``'s sensor noise levels from now on (:meth:`reset` keeps them)."""
-        self._sensors[self._check(robot)].noise = noise
+    def set_sensor_noise(self, robot: str, noise: SensorNoise, rescale_biases: bool = False) -> None:
+        """``robot``'s sensor noise levels from now on (:meth:`reset` keeps them). ``rescale_biases``:
+        also scale the IMU biases drawn at the last reset by the new bias walk over the old one (where the
+        old is above 0), so that they are what a reset at the new levels would have drawn."""
+        sensors = self._sensors[self._check(robot)]
+        if rescale_biases:
+            old = sensors.noise
+            if old.accel_bias_walk > 0:
+                sensors.accel_bias = sensors.accel_bias * (noise.accel_bias_walk / old.accel_bias_walk)
+            if old.gyro_bias_walk > 0:
+                sensors.gyro_bias = sensors.gyro_bias * (noise.gyro_bias_walk / old.gyro_bias_walk)
+        sensors.noise = noise
 
     def sensor_noise(self, robot: str) -> SensorNoise:
         """``robot``'s sensor noise levels."""

@@ -109,7 +109,7 @@ def main() -> int:
     parser.add_argument("--eval-episodes", type=int, default=20)
     parser.add_argument("--out", type=Path, default=Path("runs/ppo"))
     parser.add_argument(
-        "--threads", type=int, default=1, help="torch threads (1: the environments, not the network, are the cost)"
+        "--threads", type=int, default=1, help="torch threads (1: the environments cost most)"
     )
     args = parser.parse_args()
     try:

@@ -228,6 +228,46 @@ def test_a_randomised_episode_replays_bit_for_bit_in_another_environment():
     np.testing.assert_array_equal(np.array(first), np.array(second))
 
 
+@pytest.mark.parametrize("env_id", ["MapTidal/GoToPose-v1", "MapTidal/TeamInspection-v1"])
+def test_a_reused_environment_starts_where_a_fresh_one_does(env_id):
+    # a reset draws the IMU biases at the robots' noise levels: they must be the scenario's then, not
+    # the last episode's drawn ones (a reused environment started 0.5 mm off a fresh one, seed for seed)
+    used = gymnasium.make(env_id, randomize=True)
+    fresh = gymnasium.make(env_id, randomize=True)
+    try:
+        used.reset(seed=0)
+        got, _ = used.reset(seed=5)
+        want, _ = fresh.reset(seed=5)
+        hold = used.action_space.sample() if env_id.endswith("TeamInspection-v1") else None
+        for _ in range(3):
+            action = hold if hold is not None else np.full(6, 0.3, np.float32)
+            got, *_ = used.step(action)
+            want, *_ = fresh.step(action)
+        flat = lambda tree: np.concatenate(  # noqa: E731
+            [np.ravel(v) for v in gymnasium.spaces.flatten(used.observation_space, tree)]
+        )
+        np.testing.assert_array_equal(flat(got), flat(want))
+        sensors = lambda env: env.unwrapped.sim._sensors["rov0"]  # noqa: E731
+        np.testing.assert_array_equal(sensors(used).gyro_bias, sensors(fresh).gyro_bias)
+    finally:
+        used.close()
+        fresh.close()
+
+
+def test_a_drawn_noise_scale_scales_the_biases_drawn_at_the_reset():
+    env = gymnasium.make("MapTidal/GoToPose-v1", randomize={"noise_scale": 3.0})
+    nominal = gymnasium.make("MapTidal/GoToPose-v1", randomize={"noise_scale": 1.0})
+    try:
+        env.reset(seed=8)
+        nominal.reset(seed=8)
+        sensors = lambda e: e.unwrapped.sim._sensors["rov0"]  # noqa: E731
+        np.testing.assert_allclose(sensors(env).accel_bias, 3.0 * sensors(nominal).accel_bias, rtol=1e-12)
+        np.testing.assert_allclose(sensors(env).gyro_bias, 3.0 * sensors(nominal).gyro_bias, rtol=1e-12)
+    finally:
+        env.close()
+        nominal.close()
+
+
 def test_the_team_draws_each_robot_its_own_vehicle_and_one_water():
     env = gymnasium.make("MapTidal/TeamInspection-v1", randomize=True)
     try:

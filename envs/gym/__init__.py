@@ -14,6 +14,10 @@
     import gymnasium, maptidal.envs
     env = gymnasium.make("MapTidal/GoToPose-v1")
 
+``gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=16)`` (and StationKeeping) steps the robots together
+as numpy arrays (:mod:`maptidal.envs.gym.batched`); ``vectorization_mode="sync"`` or ``"async"`` gives
+Gymnasium's own vectors instead.
+
 The same tasks as dm_control environments: :func:`maptidal.envs.gym.dm_tasks.load`.
 """
 
@@ -36,6 +40,14 @@ MAX_EPISODE_STEPS = {
 }
 
 
+# the pose tasks' batched vector environments (maptidal.envs.gym.batched): what
+# gymnasium.make_vec(id, num_envs=N) returns unless told vectorization_mode="sync" or "async"
+VECTOR_ENTRY_POINTS = {
+    "MapTidal/GoToPose-v1": "maptidal.envs.gym.batched:go_to_pose",
+    "MapTidal/StationKeeping-v1": "maptidal.envs.gym.batched:station_keeping",
+}
+
+
 def register_environments() -> None:
     """Register every environment with Gymnasium (idempotent)."""
     import gymnasium
@@ -47,4 +59,5 @@ def register_environments() -> None:
                 entry_point=entry_point,
                 max_episode_steps=MAX_EPISODE_STEPS[env_id],
                 disable_env_checker=False,
+                vector_entry_point=VECTOR_ENTRY_POINTS.get(env_id),
             )

@@ -426,6 +426,8 @@ class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
         given here, or drawn by the task itself (StationKeeping), replaces a drawn one."""
         chosen = self._checked_reset_options(options)
         super().reset(seed=seed)
+        if self.randomization is not None:
+            randomization.restore_sensor_noise(self.sim)  # the biases a reset draws: the scenario's
         self.sim.reset(seed=int(self.np_random.integers(2**31 - 1)))
         self._steps = 0
         info = self._randomize_episode()

@@ -26,6 +26,7 @@ from maptidal.envs.gym.core import (
 )
 from maptidal.envs.gym.tank_inspection import REWARD_PER_VOXEL, SECTORS, WallCoverage, camera_viewpoint
 from maptidal.envs.randomization import apply as apply_randomization
+from maptidal.envs.randomization import restore_sensor_noise
 from maptidal.envs.scenario import Scenario, load_scenario, with_frame
 from maptidal.envs.views import third_person_frame
 from maptidal.evaluation.baselines import voronoi_viewpoints
@@ -202,10 +203,12 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
         if options:
             raise ValueError(f"MapTidal/TeamInspection takes no reset options yet, got {sorted(options)}")
         super().reset(seed=seed)
+        randomization = self.options.randomization
+        if randomization is not None:
+            restore_sensor_noise(self.sim)  # the biases a reset draws: at the scenario's levels
         self.sim.reset(seed=int(self.np_random.integers(2**31 - 1)))
         self._steps = 0
         info = {}
-        randomization = self.options.randomization
         if randomization is not None:  # each robot its own vehicle and sensors; one water, one current
             self.randomization_draw = {
                 name: randomization.sample(self.np_random, self.vehicle.n_thrusters) for name in self.agents

@@ -1,0 +1,288 @@
+"""The batched flight stack and vector environment (issue [rl], part 6): each N-row twin against its
+one-robot reference (``controllers/``' scalar classes, themselves checked against ArduPilot elsewhere),
+and the batched environment against a ``SyncVectorEnv`` of one-robot environments, step for step."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium
+import numpy as np
+import pytest
+
+import maptidal.envs  # noqa: F401  (registers MapTidal/)
+from maptidal.controllers.batched import (
+    BatchedACPID,
+    BatchedDeadReckoning,
+    BatchedStabilize,
+    dead_zones,
+    mix_batch,
+    sqrt_controllers,
+)
+from maptidal.controllers.estimation import DeadReckoning, EstimatorParams, MotionModel, StateEstimate
+from maptidal.controllers.flight_modes import ATC_RATE_ROLL_PITCH, ATC_RATE_YAW, FlightController, dead_zone
+from maptidal.controllers.mixing import mix
+from maptidal.controllers.pid import ACPID, sqrt_controller
+from maptidal.envs.gym.batched import BatchedPoseEnv, headings_from_field
+from maptidal.envs.sensors import heading_from_field
+
+RNG = np.random.default_rng(2026)
+
+
+# ----- the twins, against their one-robot references ---------------------------------------------
+def test_sqrt_controllers_and_dead_zones_are_the_scalar_functions_row_by_row():
+    errors = np.concatenate([RNG.normal(0, 0.05, 50), RNG.normal(0, 2.0, 50), [0.0, 1e-9, -1e-9]])
+    for dt in (0.02, 0.0):
+        got = sqrt_controllers(errors, 6.0, math.radians(1100.0), dt)
+        want = [sqrt_controller(float(e), 6.0, math.radians(1100.0), dt) for e in errors]
+        np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-15)
+    sticks = np.concatenate([RNG.uniform(-1, 1, 60), [0.0, 0.1, -0.1, 1.0, -1.0]])
+    np.testing.assert_array_equal(dead_zones(sticks, 0.1), [dead_zone(float(s), 0.1) for s in sticks])
+
+
+def test_batched_acpid_follows_acpid_through_resets_limits_and_nan():
+    gains = (ATC_RATE_ROLL_PITCH, ATC_RATE_ROLL_PITCH, ATC_RATE_YAW)
+    n = 4
+    batch = BatchedACPID(gains, n)
+    scalar = [[ACPID(g) for g in gains] for _ in range(n)]
+    for step in range(80):
+        target = RNG.normal(0, 1.0, (n, 3))
+        measured = RNG.normal(0, 0.5, (n, 3))
+        limit = RNG.uniform(size=(n, 3)) < 0.3
+        if step == 30:
+            target[1, 2] = np.nan  # a bad input: output 0, the loop left as it was
+        if step == 50:
+            scalar[2][0].reset()
+            batch.load(2, scalar[2])
+        got = batch.update(target, measured, 0.02, limit)
+        want = [
+            [scalar[i][k].update(target[i, k], measured[i, k], 0.02, bool(limit[i, k])) for k in range(3)]
+            for i in range(n)
+        ]
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(batch.integrator, [[p.integrator for p in row] for row in scalar], atol=1e-14)
+
+
+def _estimate(rng) -> StateEstimate:
+    return StateEstimate(
+        position=rng.normal(0, 1, 3),
+        rpy=np.array([rng.normal(0, 0.3), rng.normal(0, 0.3), rng.uniform(-math.pi, math.pi)]),
+        velocity_body=rng.normal(0, 0.2, 3),
+        angular_velocity_body=rng.normal(0, 0.3, 3),
+    )
+
+
+@pytest.mark.parametrize("mode", ["stabilize", "manual"])
+def test_batched_stabilize_gives_the_flight_controllers_mixer_inputs(mode):
+    n = 5
+    controllers = [FlightController(mode, 2.0) for _ in range(n)]
+    batch = BatchedStabilize(mode, n)
+    for row, controller in enumerate(controllers):
+        batch.load(row, controller)
+    for step in range(120):
+        pilot = RNG.uniform(-1, 1, (n, 6))
+        pilot[:, 5] = np.where(RNG.uniform(size=n) < 0.6, 0.0, pilot[:, 5])  # yaw stick let go: hold heading
+        if step in (40, 41, 42):
+            pilot[:, 3:5] = 0.0
+        estimates = [_estimate(RNG) for _ in range(n)]
+        rpy = np.array([e.rpy for e in estimates])
+        rates = np.array([e.angular_velocity_body for e in estimates])
+        got = batch.update(pilot, rpy, rates, 0.02)
+        want = [c.update(pilot[i], estimates[i], 0.02) for i, c in enumerate(controllers)]
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+    if mode == "stabilize":
+        np.testing.assert_allclose(batch.heading, [c.heading for c in controllers], atol=1e-12)
+
+
+def test_mix_batch_is_the_vectored_6dof_mixer_row_by_row():
+    pilot = np.concatenate([RNG.uniform(-1, 1, (40, 6)), np.eye(6), -np.eye(6), np.zeros((1, 6))])
+    np.testing.assert_allclose(mix_batch(pilot), [mix(row) for row in pilot], rtol=1e-14, atol=1e-15)
+
+
+def test_batched_headings_are_the_compass_function_row_by_row():
+    fields = RNG.normal(0, 0.3, (50, 3))
+    ups = RNG.normal(0, 0.2, (50, 3)) + [0.0, 0.0, 1.0]
+    want = [heading_from_field(f, u) for f, u in zip(fields, ups, strict=True)]
+    got = headings_from_field(fields, ups)
+    np.testing.assert_allclose(np.angle(np.exp(1j * np.radians(got - want))), 0.0, atol=1e-11)
+
+
+def test_batched_dead_reckoning_follows_dead_reckoning_with_and_without_the_dvl():
+    motion = MotionModel((17.0, 20.0, 30.0), (4.0, 6.0, 5.0), (18.0, 21.0, 36.0), net_buoyancy_n=2.0)
+    params = EstimatorParams(2.0, (0.1, 0.0, 0.05), (-0.05, 0.0, -0.12), motion_model=motion)
+    n = 4
+    scalar = [DeadReckoning(params, RNG.normal(0, 1, 3), RNG.uniform(-3, 3)) for _ in range(n)]
+    batch = BatchedDeadReckoning(params, n)
+    for row, estimator in enumerate(scalar):
+        estimator.set_attitude(0.1 * row, -0.05 * row, 0.3 * row)
+        batch.load(row, estimator)
+    for step in range(150):
+        accel = RNG.normal(0, 0.3, (n, 3)) + [0.0, 0.0, 9.81]
+        gyro = RNG.normal(0, 0.2, (n, 3))
+        depth = RNG.uniform(0.3, 1.5, n)
+        heading = RNG.uniform(0, 360, n)
+        valid = RNG.uniform(size=n) < (0.5 if step < 75 else 1.0)  # lost and found, then always there
+        velocity = RNG.normal(0, 0.3, (n, 3))
+        thrust = RNG.normal(0, 20, (n, 3))
+        batch.update(accel, gyro, depth, heading, valid, velocity, thrust, 0.02)
+        for i, estimator in enumerate(scalar):
+            readings = {
+                "imu": {"accel": accel[i], "gyro": gyro[i]},
+                "depth": {"depth_m": depth[i]},
+                "dvl": {"velocity_body": velocity[i] if valid[i] else None, "valid": bool(valid[i])},
+                "compass": {"heading_deg": heading[i]},
+                "thrust": {"force_body": thrust[i]},
+            }
+            estimator.update(readings, 0.02)
+    for i, estimator in enumerate(scalar):
+        s = estimator.state
+        np.testing.assert_allclose(batch.position[i], s.position, atol=1e-9)
+        np.testing.assert_allclose(batch.rpy[i], s.rpy, atol=1e-9)
+        np.testing.assert_allclose(batch.velocity_body[i], s.velocity_body, atol=1e-9)
+        np.testing.assert_allclose(batch.acceleration_world[i], s.acceleration_world, atol=1e-9)
+        np.testing.assert_allclose(batch.quaternion[i], estimator.quaternion, atol=1e-12)
+
+
+# ----- the vector environment, against SyncVectorEnv ----------------------------------------------
+CASES = {
+    "go to pose, stabilize": ("MapTidal/GoToPose-v1", {}),
+    "station keeping, randomised": ("MapTidal/StationKeeping-v1", {"randomize": True}),
+    "thrusters": ("MapTidal/GoToPose-v1", {"action": "thrusters"}),
+    "manual at half gain": ("MapTidal/GoToPose-v1", {"flight_mode": "manual", "pilot_gain": 0.5}),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_the_batch_gives_what_one_robot_environments_give_across_resets(case):
+    env_id, options = CASES[case]
+    n, length = 3, 20
+    batched = gymnasium.make_vec(env_id, num_envs=n, max_episode_steps=length, flat_obs=True, **options)
+    sync = gymnasium.make_vec(
+        env_id, num_envs=n, vectorization_mode="sync", max_episode_steps=length, flat_obs=True, **options
+    )
+    try:
+        assert isinstance(batched, BatchedPoseEnv)
+        assert batched.observation_space == sync.observation_space
+        assert batched.action_space == sync.action_space
+        got, _ = batched.reset(seed=11)
+        want, _ = sync.reset(seed=11)
+        np.testing.assert_array_equal(got, want)
+        rng = np.random.default_rng(5)
+        ended = 0
+        for _ in range(2 * length + 5):  # two episode ends, and the autoreset steps after them
+            actions = rng.uniform(-1.2, 1.2, batched.action_space.shape).astype(np.float32)
+            got, got_reward, got_end, got_cut, got_info = batched.step(actions)
+            want, want_reward, want_end, want_cut, want_info = sync.step(actions)
+            np.testing.assert_allclose(got, want, atol=1e-6)
+            np.testing.assert_allclose(got_reward, want_reward, atol=1e-6)
+            np.testing.assert_array_equal(got_end, want_end)
+            np.testing.assert_array_equal(got_cut, want_cut)
+            assert sorted(got_info) == sorted(want_info)
+            if "is_success" in want_info:
+                np.testing.assert_array_equal(got_info["_is_success"], want_info["_is_success"])
+                np.testing.assert_array_equal(got_info["is_success"], want_info["is_success"])
+            ended += int(got_cut.sum())
+        assert ended == 2 * n
+    finally:
+        batched.close()
+        sync.close()
+
+
+def test_a_partial_reset_resets_only_the_masked_robots():
+    n = 3
+    batched = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, flat_obs=True)
+    sync = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, vectorization_mode="sync", flat_obs=True)
+    try:
+        batched.reset(seed=2)
+        sync.reset(seed=2)
+        actions = np.full((n, 6), 0.3, np.float32)
+        for _ in range(5):
+            batched.step(actions)
+            before, *_ = sync.step(actions)
+        mask = np.array([True, False, True])
+        got, _ = batched.reset(seed=[40, None, 42], options={"reset_mask": mask})
+        want, _ = sync.reset(seed=[40, None, 42], options={"reset_mask": mask})
+        np.testing.assert_allclose(got, want, atol=1e-6)
+        np.testing.assert_allclose(got[1], before[1], atol=1e-6)  # the unmasked robot carried on
+        for _ in range(5):
+            got, *_ = batched.step(actions)
+            want, *_ = sync.step(actions)
+        np.testing.assert_allclose(got, want, atol=1e-6)
+    finally:
+        batched.close()
+        sync.close()
+
+
+def test_make_vec_batches_the_pose_tasks_and_falls_back_where_it_cannot():
+    made = gymnasium.make_vec("MapTidal/StationKeeping-v1", num_envs=2)
+    assert isinstance(made, BatchedPoseEnv) and made.max_episode_steps == 200
+    observations, _ = made.reset(seed=0)
+    assert set(observations) == {"pose", "velocity", "depth", "imu", "target"}
+    assert observations["target"].shape == (2, 4)
+    made.close()
+    with pytest.warns(UserWarning, match="image observations"):
+        fallback = gymnasium.make_vec(
+            "MapTidal/GoToPose-v1", num_envs=2, obs_images="left", image_size=(24, 32)
+        )
+    try:
+        assert isinstance(fallback, gymnasium.vector.SyncVectorEnv)
+        observations, _ = fallback.reset(seed=0)
+        assert observations["left"].shape == (2, 24, 32, 3)
+        for _ in range(3):
+            fallback.step(fallback.action_space.sample())
+    finally:
+        fallback.close()
+    with pytest.warns(UserWarning, match="alt_hold"):
+        gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=1, flight_mode="alt_hold").close()
+
+
+def test_bad_actions_and_arguments_raise_before_anything_moves():
+    env = BatchedPoseEnv("go_to_pose", 2, flat_obs=True)
+    try:
+        with pytest.raises(gymnasium.error.ResetNeeded):
+            env.step(np.zeros((2, 6), np.float32))
+        env.reset(seed=0)
+        time_before = [sim.time for sim in env.sims]
+        for bad, message in (
+            (np.full((2, 6), np.nan, np.float32), "finite"),
+            (np.zeros((3, 6), np.float32), "shape"),
+            (np.zeros(6, np.float32), "shape"),
+        ):
+            with pytest.raises(ValueError, match=message):
+                env.step(bad)
+        assert [sim.time for sim in env.sims] == time_before
+        with pytest.raises(ValueError, match="reset_mask"):
+            env.reset(options={"reset_mask": [True]})
+        with pytest.raises(ValueError, match="seeds"):
+            env.reset(seed=[1, 2, 3])
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="num_envs"):
+        BatchedPoseEnv("go_to_pose", 0)
+    with pytest.raises(ValueError, match="cannot be batched"):
+        BatchedPoseEnv("go_to_pose", 1, obs_images="stereo")
+    with pytest.raises(ValueError, match="task"):
+        BatchedPoseEnv("tank_inspection", 1)
+
+
+def test_contacts_cost_the_same_in_the_batch():
+    # dived into the floor from just above it: the contact's cost is the one-robot environment's
+    n = 2
+    start = {"pose": (-2.0, 0.0, 0.35, 0.3)}
+    batched = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, flat_obs=True)
+    sync = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, vectorization_mode="sync", flat_obs=True)
+    try:
+        batched.reset(seed=4, options=start)
+        sync.reset(seed=4, options=start)
+        actions = np.tile(np.array([0.2, 0.0, -1.0, 0.0, 0.0, 0.0], np.float32), (n, 1))
+        touched = 0.0
+        for _ in range(25):
+            _, got_reward, *_, got_info = batched.step(actions)
+            _, want_reward, *_, want_info = sync.step(actions)
+            np.testing.assert_allclose(got_reward, want_reward, atol=1e-6)
+            np.testing.assert_allclose(got_info["contact_s"], want_info["contact_s"])
+            touched += float(got_info["contact_s"].sum())
+        assert touched > 0.5  # it did touch the floor, for a while
+    finally:
+        batched.close()
+        sync.close()
