@@ -1,7 +1,7 @@
 """Re-run the mutation lists of tests/README.md (M: physics, F: flight modes and estimator, V: done means
-seen, L: localisation, S: sharing discoveries, T: the closed tank, I: interrupts): apply each
-mutation to the source, run its group's tests, record which test fails first, and restore the file.
-Every mutation must be killed.
+seen, L: localisation, S: sharing discoveries, T: the closed tank, I: interrupts, B: the batched
+environment): apply each mutation to the source, run its group's tests, record which test fails first,
+and restore the file. Every mutation must be killed.
 
     python tests/mutations/run_mutations.py            # all
     python tests/mutations/run_mutations.py M3 F7      # some
@@ -35,6 +35,7 @@ LOCALISATION_TESTS = ["tests/test_relocalisation.py", "tests/test_localisation_l
 SHARING_TESTS = ["tests/test_sharing.py", "tests/test_allocation.py"]
 TANK_TESTS = ["tests/test_closed_tank.py", "tests/test_world_geometry.py"]
 SIGNAL_TESTS = ["tests/test_signals.py"]
+BATCHED_TESTS = ["tests/test_batched.py"]
 TESTS_OF_GROUP = {
     "M": TESTS,
     "F": FLIGHT_TESTS,
@@ -43,6 +44,7 @@ TESTS_OF_GROUP = {
     "S": SHARING_TESTS,
     "T": TANK_TESTS,
     "I": SIGNAL_TESTS,
+    "B": BATCHED_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -541,6 +543,76 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
     "I5": (
         "an interrupted mission leaves its video to the garbage collector",
         [("maptidal/mission/run.py", "                self.video.abandon()", "                pass")],
+    ),
+    "I6": (
+        "a signal's retry left pending after the command printed its line",
+        [("maptidal/cli/interrupts.py", "        self.settle()\n", "        pass\n")],
+    ),
+    "B1": (
+        "the batched rate loops' integrator ignores saturation",
+        [("controllers/batched.py", "np.where(~limit | shrinking, grown, self.integrator)", "grown")],
+    ),
+    "B2": (
+        "the batched pitch rate loop's output not negated",
+        [
+            (
+                "controllers/batched.py",
+                "outputs[:, 0], -outputs[:, 1], -outputs[:, 2]",
+                "outputs[:, 0], outputs[:, 1], -outputs[:, 2]",
+            )
+        ],
+    ),
+    "B3": (
+        "the batched estimator without its compass correction",
+        [
+            (
+                "controllers/batched.py",
+                "correction = correction + (heading_gain * error)[:, None] * rotation[:, 2]",
+                "correction = correction",
+            )
+        ],
+    ),
+    "B4": (
+        "the batched heading captured without the 250 ms delay",
+        [
+            (
+                "controllers/batched.py",
+                "(self.time_s < self.last_yaw_input_s + HEADING_CAPTURE_DELAY_S)",
+                "(self.time_s < self.last_yaw_input_s)",
+            )
+        ],
+    ),
+    "B5": (
+        "the batched estimator always on the motion model",
+        [
+            (
+                "controllers/batched.py",
+                "velocity = np.where(dvl_valid[:, None], velocity, modelled)",
+                "velocity = modelled",
+            )
+        ],
+    ),
+    "B6": (
+        "the batch's accelerometer bias does not walk",
+        [("envs/gym/batched.py", "        self.accel_bias += noise[:, 0:3]\n", "")],
+    ),
+    "B7": (
+        "the batch's GoToPose reward without the contact cost",
+        [
+            (
+                "envs/gym/batched.py",
+                "rewards = rewards - (0.05 * energy + contact_cost) + within",
+                "rewards = rewards - (0.05 * energy) + within",
+            )
+        ],
+    ),
+    "B8": (
+        "the batch's gyro noise taken from the accelerometer's normals",
+        [("envs/gym/batched.py", "self.gyro_bias + noise[:, 9:12]", "self.gyro_bias + noise[:, 6:9]")],
+    ),
+    "B9": (
+        "an autoresetting row keeps its last step's info",
+        [("envs/gym/batched.py", "infos = _only_rows(infos, active)", "pass")],
     ),
 }
 
