@@ -241,6 +241,8 @@ class BatchedStabilize:
         self.heading = np.zeros(n)
         self.heading_set = np.zeros(n, bool)
         self.last_yaw_input_s = np.full(n, -math.inf)
+        p = self.params
+        self._dead_zone_widths = np.array([p.roll_pitch_dead_zone, p.roll_pitch_dead_zone, p.yaw_dead_zone])
 
     def load(self, row: int, controller: FlightController) -> None:
         """Take row ``row``'s state from one robot's :class:`FlightController`."""
@@ -262,17 +264,18 @@ class BatchedStabilize:
         p = self.params
         out = pilot.copy()
         angle_max = math.radians(p.max_lean_deg)
-        roll = dead_zones(pilot[:, 3], p.roll_pitch_dead_zone) * angle_max
-        pitch = dead_zones(pilot[:, 4], p.roll_pitch_dead_zone) * angle_max
+        # the roll, pitch and yaw sticks' dead zones at once (numpy's cost here is per call, not per row)
+        sticks = dead_zones(pilot[:, 3:6], self._dead_zone_widths)
+        roll, pitch = sticks[:, 0] * angle_max, sticks[:, 1] * angle_max
         total = np.hypot(roll, pitch)
         over = total > angle_max
-        scale = np.where(over, angle_max / np.where(over, total, 1.0), 1.0)
-        roll, pitch = np.where(over, roll * scale, roll), np.where(over, pitch * scale, pitch)
+        if over.any():
+            safe_total = np.where(over, total, 1.0)
+            roll = np.where(over, roll * angle_max / safe_total, roll)
+            pitch = np.where(over, pitch * angle_max / safe_total, pitch)
         roll_target = np.arctan(np.cos(pitch) * np.tan(roll))
-        errors = wrap_angles(np.stack((roll_target, -pitch), axis=-1) - rpy[:, :2])
-        lean_rates = sqrt_controllers(errors, ATC_ANGLE_P, ATC_ACCEL_MAX_RAD_S2, dt)
         yaw = rpy[:, 2]
-        yaw_rate = -dead_zones(pilot[:, 5], p.yaw_dead_zone) * math.radians(p.max_yaw_rate_deg_s)
+        yaw_rate = -sticks[:, 2] * math.radians(p.max_yaw_rate_deg_s)
         stick = yaw_rate != 0.0
         capture = ~stick & (
             (self.time_s < self.last_yaw_input_s + HEADING_CAPTURE_DELAY_S) | ~self.heading_set
@@ -281,9 +284,11 @@ class BatchedStabilize:
         self.heading = np.where(stick | capture, yaw, self.heading)
         self.heading_set = self.heading_set | stick | capture
         self.last_yaw_input_s = np.where(stick, self.time_s, self.last_yaw_input_s)
-        held = sqrt_controllers(wrap_angles(self.heading - yaw), ATC_ANGLE_P, ATC_ACCEL_MAX_RAD_S2, dt)
-        yaw_rate = np.where(hold, held, yaw_rate)
-        targets = np.column_stack((lean_rates, yaw_rate))
+        # the three angle loops at once: roll and pitch to their targets, yaw to the held heading
+        angles = np.column_stack((roll_target, -pitch, self.heading))
+        errors = wrap_angles(angles - rpy)
+        targets = sqrt_controllers(errors, ATC_ANGLE_P, ATC_ACCEL_MAX_RAD_S2, dt)
+        targets[:, 2] = np.where(hold, targets[:, 2], yaw_rate)
         outputs = self.rate.update(targets, rates, dt, limit=self.saturated)
         self.saturated = np.abs(outputs) >= 1.0
         out[:, 3], out[:, 4], out[:, 5] = outputs[:, 0], -outputs[:, 1], -outputs[:, 2]
