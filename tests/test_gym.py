@@ -650,3 +650,43 @@ def test_the_team_replays_from_a_saved_state_bit_for_bit_here_in_a_pickle_and_in
         copied.close()
     finally:
         env.close()
+
+
+def test_the_ppo_summary_averages_seeds_and_tabulates_evaluations(tmp_path):
+    # examples/ppo_summary.py on made-up runs: the table's means and spreads over seeds, the curves' bins
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "ppo_summary.py"
+    spec = importlib.util.spec_from_file_location("ppo_summary", path)
+    summary = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(summary)
+    for seed, (ppo, scripted) in enumerate([(10.0, 5.0), (20.0, 5.0)]):
+        run = tmp_path / f"run{seed}"
+        run.mkdir()
+        evaluations = {
+            "nominal": {
+                "ppo": {"return_mean": ppo, "success": 0.5},
+                "scripted": {"return_mean": scripted, "success": 1.0},
+            }
+        }
+        curve = [{"step": 100 * k, "return": float(k + seed), "success": False} for k in range(1, 11)]
+        result = {
+            "env": "MapTidal/StationKeeping-v1",
+            "randomized_training": False,
+            "seed": seed,
+            "timesteps": 1000,
+            "evaluations": evaluations,
+            "curve": curve,
+        }
+        (run / "result.json").write_text(json.dumps(result))
+    groups = summary.load([tmp_path / "run0", tmp_path / "run1", tmp_path / "missing"])
+    text = summary.table(groups)
+    assert "15.0 +- 5.0, 50% reached" in text and "5.0 +- 0.0, 100% reached" in text
+    edges = np.linspace(0, 1000, 11)
+    np.testing.assert_allclose(
+        summary.binned_curve(groups[("MapTidal/StationKeeping-v1", False)][1], edges)[:9], np.arange(2, 11)
+    )
+    summary.plot(groups, tmp_path / "curves.png")
+    assert (tmp_path / "curves.png").stat().st_size > 10_000
