@@ -297,22 +297,56 @@ def _episode(env, theta, seed) -> tuple[float, bool]:
             return total, reached
 
 
+def _batch_returns(batch, thetas: np.ndarray, seeds: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """One episode per robot of the batched environment, robot k flying the linear policy ``thetas[k]``
+    (:func:`_linear_policy`, row by row) from seed ``seeds[k]``: the returns and who reached the pose."""
+    observation, _ = batch.reset(seed=seeds)
+    totals, reached = np.zeros(batch.num_envs), np.zeros(batch.num_envs, bool)
+    while True:
+        axes = (
+            thetas[:, :4] * observation["target"] + thetas[:, 4:] * observation["velocity"][:, [0, 1, 2, 5]]
+        )
+        actions = np.zeros((batch.num_envs, 6), np.float32)
+        actions[:, :3], actions[:, 5] = axes[:, :3], axes[:, 3]
+        observation, reward, terminated, truncated, info = batch.step(actions.clip(-1, 1))
+        totals += reward
+        reached |= info["is_success"]
+        if (terminated | truncated).all():
+            return totals, reached
+
+
 def test_a_linear_policy_trained_by_the_cross_entropy_method_reaches_the_target():
     """The reward and the observations carry the signal: from zero gains, six CEM generations of 16
-    (one common episode each) find a policy that reaches the pose in most new episodes."""
-    env = gymnasium.make("MapTidal/GoToPose-v1", max_episode_steps=80)
+    (one common episode each) find a policy that reaches the pose in most new episodes. The population
+    flies as one batched environment (make_vec), which gives what 16 one-robot environments give."""
+    batch = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=16, max_episode_steps=80)
     rng = np.random.default_rng(0)
     mean, std = np.zeros(8), np.ones(8)
     try:
         for generation in range(6):
             population = mean + std * rng.normal(size=(16, 8))
-            scores = [_episode(env, theta, 1000 + generation)[0] for theta in population]
+            scores, _ = _batch_returns(batch, population, [1000 + generation] * 16)
             elite = population[np.argsort(scores)[-4:]]
             mean, std = elite.mean(axis=0), elite.std(axis=0) + 0.05
-        reached = [_episode(env, mean, 5000 + k)[1] for k in range(10)]
+        _, reached = _batch_returns(batch, np.tile(mean, (16, 1)), [5000 + k for k in range(16)])
+    finally:
+        batch.close()
+    assert reached[:10].sum() >= 7, reached[:10]
+
+
+def test_the_batched_episode_is_the_one_robot_episode():
+    # what the CEM test relies on: a linear policy's return in the batch is its return alone
+    theta = np.array([1.5, 1.5, 1.5, 1.0, -0.5, -0.5, -0.5, -0.3])
+    env = gymnasium.make("MapTidal/GoToPose-v1", max_episode_steps=30)
+    batch = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=2, max_episode_steps=30)
+    try:
+        alone = [_episode(env, theta, seed) for seed in (7, 8)]
+        together, reached = _batch_returns(batch, np.tile(theta, (2, 1)), [7, 8])
     finally:
         env.close()
-    assert sum(reached) >= 7, reached
+        batch.close()
+    np.testing.assert_allclose(together, [total for total, _ in alone], atol=1e-6)
+    assert list(reached) == [hit for _, hit in alone]
 
 
 # ----- the team task and PettingZoo -----------------------------------------------------------------
