@@ -6,6 +6,7 @@ that is not the simulator's?).
     pip install -e .[rl]          # stable-baselines3 and torch 2.13.0 (CPU), outside the default install
     python examples/train_ppo.py --timesteps 200000 --envs 2 --out runs/ppo
     python examples/train_ppo.py --randomize --out runs/ppo-randomized
+    python examples/train_ppo.py --batched --envs 16 --out runs/ppo-batched   # 16 robots, one process
 
 Writes ``learning_curve.png`` (mean episode return and success rate against environment steps),
 ``evaluation.png`` (mean return per condition, PPO beside the scripted controller) and ``result.json``
@@ -78,6 +79,71 @@ def make_env(env_id: str, seed: int, randomize: bool):
     return build
 
 
+def batched_vec_env(env_id: str, n: int, seed: int, randomize: bool):
+    """Stable-Baselines3's ``VecEnv`` over maptidal's batched environment (``gymnasium.make_vec``: N
+    robots stepped as numpy arrays in this process), with SB3's autoreset: a robot whose episode ended
+    starts its next one at once, its last observation in ``info["terminal_observation"]``, and
+    ``info["TimeLimit.truncated"]`` says the episode was cut by time. Wrapped in SB3's ``VecMonitor``
+    for episode returns, with ``is_success`` in each episode's info."""
+    from stable_baselines3.common.vec_env import VecEnv, VecMonitor
+
+    class BatchedVecEnv(VecEnv):
+        def __init__(self) -> None:
+            self.batch = gymnasium.make_vec(
+                env_id,
+                num_envs=n,
+                flat_obs=True,
+                max_episode_steps=EPISODE_STEPS,
+                randomize=True if randomize else None,
+            )
+            super().__init__(n, self.batch.single_observation_space, self.batch.single_action_space)
+            self._actions = None
+            self._first_seed = seed
+
+        def reset(self):
+            observations, _ = self.batch.reset(seed=self._first_seed)
+            self._first_seed = None  # later resets continue each robot's own stream
+            return observations
+
+        def step_async(self, actions) -> None:
+            self._actions = np.asarray(actions, np.float32)
+
+        def step_wait(self):
+            observations, rewards, terminated, truncated, info = self.batch.step(self._actions)
+            done = terminated | truncated
+            infos = [
+                {
+                    "is_success": bool(info["is_success"][k]),
+                    "TimeLimit.truncated": bool(truncated[k] and not terminated[k]),
+                }
+                for k in range(n)
+            ]
+            if done.any():
+                for k in np.flatnonzero(done):
+                    infos[k]["terminal_observation"] = observations[k].copy()
+                restarted, _ = self.batch.reset(options={"reset_mask": done})
+                observations = np.where(done[:, None], restarted, observations)
+            return observations, rewards.astype(np.float32), done, infos
+
+        def close(self) -> None:
+            self.batch.close()
+
+        def get_attr(self, name, indices=None):
+            return [getattr(self.batch.envs[k], name) for k in self._get_indices(indices)]
+
+        def set_attr(self, name, value, indices=None) -> None:
+            for k in self._get_indices(indices):
+                setattr(self.batch.envs[k], name, value)
+
+        def env_method(self, name, *args, indices=None, **kwargs):
+            return [getattr(self.batch.envs[k], name)(*args, **kwargs) for k in self._get_indices(indices)]
+
+        def env_is_wrapped(self, wrapper_class, indices=None):
+            return [False for _ in self._get_indices(indices)]
+
+    return VecMonitor(BatchedVecEnv(), info_keywords=("is_success",))
+
+
 def evaluate(env_id: str, act, episodes: int, seed: int, randomize, flat: bool) -> dict:
     """Mean and spread of the return and the success rate of ``act`` (observation to action) over
     ``episodes`` new episodes under the randomisation ``randomize``; every policy meets the same
@@ -106,6 +172,11 @@ def main() -> int:
     parser.add_argument("--timesteps", type=int, default=200_000, help="environment steps to train")
     parser.add_argument("--envs", type=int, default=2, help="parallel environments (subprocesses)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--batched",
+        action="store_true",
+        help="--envs robots in one batched environment (make_vec), not one subprocess each",
+    )
     parser.add_argument("--eval-episodes", type=int, default=20)
     parser.add_argument("--out", type=Path, default=Path("runs/ppo"))
     parser.add_argument(
@@ -141,7 +212,10 @@ def main() -> int:
             return True
 
     env_id = ENV_IDS[args.env]
-    vec = SubprocVecEnv([make_env(env_id, args.seed + k, args.randomize) for k in range(args.envs)])
+    if args.batched:
+        vec = batched_vec_env(env_id, args.envs, args.seed, args.randomize)
+    else:
+        vec = SubprocVecEnv([make_env(env_id, args.seed + k, args.randomize) for k in range(args.envs)])
     model = PPO("MlpPolicy", vec, n_steps=1024, batch_size=256, gamma=0.99, seed=args.seed, verbose=0)
     curve = Curve()
     model.learn(total_timesteps=args.timesteps, callback=curve)

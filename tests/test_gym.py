@@ -724,3 +724,34 @@ def test_the_ppo_summary_averages_seeds_and_tabulates_evaluations(tmp_path):
     )
     summary.plot(groups, tmp_path / "curves.png")
     assert (tmp_path / "curves.png").stat().st_size > 10_000
+
+
+def test_the_batched_environment_trains_stable_baselines3_with_its_autoreset():
+    # examples/train_ppo.py --batched: SB3's VecEnv over make_vec's batch (the rl extra; skipped without)
+    pytest.importorskip("stable_baselines3")
+    import importlib.util
+    from pathlib import Path
+
+    from stable_baselines3.common.vec_env.base_vec_env import VecEnv
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "train_ppo.py"
+    spec = importlib.util.spec_from_file_location("train_ppo", path)
+    train_ppo = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(train_ppo)
+    vec = train_ppo.batched_vec_env("MapTidal/GoToPose-v1", 2, seed=3, randomize=False)
+    try:
+        assert isinstance(vec, VecEnv) and vec.num_envs == 2
+        observations = vec.reset()
+        assert observations.shape == (2, vec.observation_space.shape[0])
+        hold = np.zeros((2, 6), np.float32)
+        for step in range(1, train_ppo.EPISODE_STEPS + 1):
+            observations, _, dones, infos = vec.step(hold)
+            assert dones.tolist() == [step == train_ppo.EPISODE_STEPS] * 2
+        for info, observation in zip(infos, observations, strict=True):
+            assert info["TimeLimit.truncated"] and "episode" in info
+            assert info["episode"]["l"] == train_ppo.EPISODE_STEPS
+            assert not np.allclose(info["terminal_observation"], observation)  # a new episode began
+        observations, *_ = vec.step(hold)  # the next episode runs on; no step is lost to the reset
+        assert vec.venv.batch.steps.tolist() == [1, 1]
+    finally:
+        vec.close()
