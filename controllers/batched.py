@@ -339,15 +339,19 @@ class BatchedDeadReckoning:
         heading_deg: np.ndarray,
         dvl_valid: np.ndarray,
         dvl_velocity: np.ndarray,
-        thrust_force: np.ndarray,
+        thrust_force: np.ndarray | None,
         dt: float,
     ) -> None:
-        """Fold in one control period's readings, (N, 3) or (N,) each: :meth:`DeadReckoning.update`."""
+        """Fold in one control period's readings, (N, 3) or (N,) each: :meth:`DeadReckoning.update`.
+        ``thrust_force`` (the commanded body force, N) is only read where the DVL has no lock, and may be
+        None while every row's DVL reading is valid."""
         p = self.params
         previous_velocity = self.velocity_body
         rotation = rotations_from_quaternions(self.quaternion)
         velocity = dvl_velocity - cross_rows(gyro, self._dvl_position)
         if not dvl_valid.all():
+            if thrust_force is None:
+                raise ValueError("a DVL reading is invalid: the motion model needs the thrust force")
             # the motion model (MotionModel.step) where the DVL has no lock
             up_body = rotation[:, 2]
             force = thrust_force + self._net_buoyancy_n * up_body

@@ -192,6 +192,12 @@ class BatchedPoseEnv(VectorEnv):
         self._bad_states = np.zeros(n, int)
         self._noise_scales = np.zeros((n, NORMALS_PER_PERIOD))
         self._beams = [self._slices[f"beam{k}"].start for k in range(4)]
+        # views into each robot's MjData, made at each reset rather than N times per control period
+        # (a microsecond or two each): numpy views of MuJoCo's buffers stay valid for the data's life
+        self._models, self._datas = [None] * n, [None] * n
+        self._ctrl_views, self._sensordata_views, self._up_views = [None] * n, [None] * n, [None] * n
+        for row in range(n):
+            self._refresh_views(row)
 
     @staticmethod
     def _check_sensors(env) -> None:
@@ -247,6 +253,7 @@ class BatchedPoseEnv(VectorEnv):
         self.target[row], self.target_yaw[row] = env.target, env.target_yaw
         self.previous[row] = env._previous if self.task == "go_to_pose" else (0.0, 0.0)
         self.steps[row] = 0
+        self._refresh_views(row)
         self._gains[row] = sim._thruster_gains[robot]
         self._bad_states[row] = int(sim.data.warning.number[_BAD_STATE_WARNINGS].sum())
         # what each of a period's standard normals is scaled by (_draw_noise): this robot's noise levels
@@ -261,6 +268,13 @@ class BatchedPoseEnv(VectorEnv):
             + [n.dvl_sigma] * 3
             + [n.compass_sigma_deg]
         )
+
+    def _refresh_views(self, row: int) -> None:
+        sim = self.sims[row]
+        self._models[row], self._datas[row] = sim.model, sim.data
+        self._ctrl_views[row] = sim.data.ctrl[self._ctrl]
+        self._sensordata_views[row] = sim.data.sensordata
+        self._up_views[row] = sim.data.xmat[self._body, 6:9]
 
     def _regroup_plants(self) -> None:
         # the thrust curve of each robot's plant (randomised ones differ): robots that share one are
@@ -346,8 +360,8 @@ class BatchedPoseEnv(VectorEnv):
         for plant, rows in self._plant_groups:
             normalised[rows] = plant.normalised_thrust(self.outputs[rows])
         controls = normalised * self._gains
-        for row, sim in enumerate(self.sims):
-            sim.data.ctrl[self._ctrl] = controls[row]
+        for ctrl, row_controls in zip(self._ctrl_views, controls, strict=True):
+            ctrl[:] = row_controls
 
     def _draw_noise(self, rows: np.ndarray) -> np.ndarray:
         """Every standard normal this step's sensors need, (periods, N, 17) (zeros for rows not
@@ -367,10 +381,11 @@ class BatchedPoseEnv(VectorEnv):
         this period's scaled normals); which rows touched something."""
         touching = np.zeros(self.num_envs)
         substeps = self.substeps_per_period
+        models, datas = self._models, self._datas
         for row in rows:
-            sim = self.sims[row]
-            mujoco.mj_step(sim.model, sim.data, nstep=substeps)
-            touching[row] = sim.data.ncon > 0  # one robot in the tank: every contact is the robot's
+            data = datas[row]
+            mujoco.mj_step(models[row], data, nstep=substeps)
+            touching[row] = data.ncon > 0  # one robot in the tank: every contact is the robot's
         self.accel_bias += noise[:, 0:3]
         self.gyro_bias += noise[:, 3:6]
         return touching
@@ -390,8 +405,8 @@ class BatchedPoseEnv(VectorEnv):
     def _estimate(self, noise: np.ndarray) -> None:
         """Read every robot's sensors (RobotSensors.read, with this period's scaled normals ``noise``)
         and update the estimates."""
-        raw = np.stack([sim.data.sensordata for sim in self.sims])
-        up_body = np.stack([sim.data.xmat[self._body, 6:9] for sim in self.sims])
+        raw = np.stack(self._sensordata_views)
+        up_body = np.stack(self._up_views)
         s = self._slices
         accel = raw[:, s["accelerometer"]] + self.accel_bias + noise[:, 6:9]
         gyro = raw[:, s["gyro"]] + self.gyro_bias + noise[:, 9:12]
@@ -401,7 +416,7 @@ class BatchedPoseEnv(VectorEnv):
         valid = np.all((ranges >= low) & (ranges <= high), axis=1)
         velocity = raw[:, s["velocimeter"]] + noise[:, 13:16]
         heading = (headings_from_field(raw[:, s["magnetometer"]], up_body) + noise[:, 16]) % 360.0
-        thrust = self._thrust_force(self.outputs)
+        thrust = None if valid.all() else self._thrust_force(self.outputs)  # needed without a DVL lock
         self.estimator.update(accel, gyro, depth, heading, valid, velocity, thrust, self.period_s)
         self.readings = {"accel": accel, "gyro": gyro, "depth_m": depth}
 

@@ -1,6 +1,7 @@
 """Benchmark the batched vector environment (``make_vec(..., vectorization_mode="vector_entry_point")``)
 against a ``SyncVectorEnv`` of the same number of one-robot environments, and against bare MuJoCo
-(``mj_step`` on each robot's model and data for the same physics time), in alternating blocks in one
+(``mj_step`` on each robot's model and data, given the batch's own controls, so the same physics), in
+alternating blocks in one
 process so that a busy moment on a shared machine hits every side alike (median block times).
 
     python tests/bench/bench_batched.py [--envs 16] [--steps 400] [--env-id MapTidal/GoToPose-v1]
@@ -25,14 +26,25 @@ import maptidal.envs  # noqa: F401  (registers MapTidal/)
 
 
 def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float]:
-    """Steps per second (robot steps: vector steps times N) of each side, and the ratios."""
+    """Robot steps per second of each side, and the ratios. The bare side is MuJoCo alone doing the
+    batch's very physics: a second batch reset with the same seed, whose robots get, period by period,
+    the controls the batch gave its own (recorded as it ran) and are stepped by ``mj_step`` and nothing
+    else, so both sides integrate the same states and contacts."""
     batched = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
     sync = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="sync")
-    bare = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
-    for vec in (batched, sync, bare):
+    twin = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
+    for vec in (batched, sync, twin):
         vec.reset(seed=0)
-    sims = [env.sim for env in bare.envs]
-    physics_steps = bare.periods_per_step * bare.substeps_per_period
+    sims = [env.sim for env in twin.envs]
+    substeps = twin.substeps_per_period
+    recorded: list[list[np.ndarray]] = []
+    drive = batched._drive
+
+    def recording_drive(pilot):
+        drive(pilot)
+        recorded.append([sim.data.ctrl.copy() for sim in batched.sims])
+
+    batched._drive = recording_drive
     rng = np.random.default_rng(0)
     actions = rng.uniform(-0.3, 0.3, (n, *batched.single_action_space.shape)).astype(np.float32)
 
@@ -43,8 +55,11 @@ def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float
         sync.step(actions)
 
     def run_bare() -> None:
-        for sim in sims:
-            mujoco.mj_step(sim.model, sim.data, nstep=physics_steps)
+        for _ in range(batched.periods_per_step):
+            controls = recorded.pop(0)
+            for sim, ctrl in zip(sims, controls, strict=True):
+                sim.data.ctrl[:] = ctrl
+                mujoco.mj_step(sim.model, sim.data, nstep=substeps)
 
     sides = {"batched": run_batched, "sync": run_sync, "bare mj_step": run_bare}
     for run in sides.values():  # warm-up
@@ -57,7 +72,10 @@ def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float
             for _ in range(block):
                 run()
             times[name].append(time.perf_counter() - start)
-    for vec in (batched, sync, bare):
+    same = all(
+        np.allclose(a.sim.data.qpos, b.sim.data.qpos) for a, b in zip(batched.envs, twin.envs, strict=True)
+    )
+    for vec in (batched, sync, twin):
         vec.close()
     rate = {name: n * block / float(np.median(values)) for name, values in times.items()}
     return {
@@ -65,6 +83,7 @@ def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float
         "batched / sync": rate["batched"] / rate["sync"],
         "batched step / bare mj_step (time)": rate["bare mj_step"] / rate["batched"],
         "sync step / bare mj_step (time)": rate["bare mj_step"] / rate["sync"],
+        "bare side flew the batch's trajectory (1 = yes)": float(same),
     }
 
 
