@@ -173,6 +173,9 @@ def main() -> int:
     parser.add_argument("--envs", type=int, default=2, help="parallel environments (subprocesses)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
+        "--n-steps", type=int, default=0, help="PPO's steps per environment per update (0: 1024 / --envs)"
+    )
+    parser.add_argument(
         "--batched",
         action="store_true",
         help="--envs robots in one batched environment (make_vec), not one subprocess each",
@@ -216,7 +219,9 @@ def main() -> int:
         vec = batched_vec_env(env_id, args.envs, args.seed, args.randomize)
     else:
         vec = SubprocVecEnv([make_env(env_id, args.seed + k, args.randomize) for k in range(args.envs)])
-    model = PPO("MlpPolicy", vec, n_steps=1024, batch_size=256, gamma=0.99, seed=args.seed, verbose=0)
+    # 1024 samples per update however many robots gather them (n_steps is per environment)
+    n_steps = args.n_steps or max(64, 1024 // args.envs)
+    model = PPO("MlpPolicy", vec, n_steps=n_steps, batch_size=256, gamma=0.99, seed=args.seed, verbose=0)
     curve = Curve()
     model.learn(total_timesteps=args.timesteps, callback=curve)
     vec.close()
@@ -237,6 +242,8 @@ def main() -> int:
         "randomized_training": args.randomize,
         "timesteps": args.timesteps,
         "envs": args.envs,
+        "batched": args.batched,
+        "n_steps": n_steps,
         "seed": args.seed,
         "eval_episodes": args.eval_episodes,
         "conditions": {name: value for name, value in CONDITIONS.items()},
