@@ -156,16 +156,17 @@ class BatchedPoseEnv(VectorEnv):
         self._check_sensors(first)
         self.thrusters_action = first.options.action == "thrusters"
         mode = first.sim.flight_mode(self.robot) if not self.thrusters_action else "manual"
-        self.autopilot = None if self.thrusters_action or mode == "manual" else mode
+        # STABILIZE flies on an autopilot whose outputs are linearised (ModeParams.linearise_thrust);
+        # MANUAL and the thruster action send the mixer's or the policy's commands as they are
+        self.stabilized = mode == "stabilize"
+        self.linearise = self.stabilized and first.sim.mode_params.linearise_thrust
         self.flight = BatchedStabilize(mode, num_envs, first.sim.mode_params)
-        first.reset(seed=0)  # an estimator to copy the parameters from
         self.estimator = BatchedDeadReckoning(first.sim._estimators[self.robot].params, num_envs)
         self.pilot_gain = first.sim.mode_params.pilot_gain
         spec = first.sim._specs[self.robot]
         self.vehicle_model = first.sim._vehicle_models[self.robot]
         self.controller_curve = spec.vehicle.thruster
         self.n_thrusters = spec.vehicle.n_thrusters
-        self.linearise = first.sim.mode_params.linearise_thrust
         self.substeps_per_period = first.scenario.substeps
         self.period_s = first.scenario.control_period_s
         self.periods_per_step = first.substeps
@@ -239,7 +240,7 @@ class BatchedPoseEnv(VectorEnv):
         env, sim = self.envs[row], self.sims[row]
         robot = self.robot
         self.estimator.load(row, sim._estimators[robot])
-        if self.autopilot is not None:
+        if self.stabilized:
             self.flight.load(row, sim._autopilots[robot].controller)
         else:
             self.flight.time_s[row] = 0.0
@@ -351,7 +352,7 @@ class BatchedPoseEnv(VectorEnv):
                 pilot, self.estimator.rpy, self.estimator.angular_velocity_body, self.period_s
             )
             outputs = mix_batch(mixer_input)
-            if self.autopilot is not None and self.linearise:
+            if self.linearise:
                 outputs = linearise_thrusters(
                     outputs, self.controller_curve.curve, self.controller_curve.pwm_range
                 )
