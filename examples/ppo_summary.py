@@ -27,10 +27,14 @@ def load(paths: list[Path]) -> dict[tuple[str, bool], list[dict]]:
     groups: dict[tuple[str, bool], list[dict]] = {}
     for path in paths:
         result_file = path / "result.json" if path.is_dir() else path
-        if not result_file.exists():
+        if result_file.suffix != ".json" or not result_file.exists():
             print(f"skipped {path}: no result.json (still training?)", file=sys.stderr)
             continue
-        result = json.loads(result_file.read_text())
+        try:
+            result = json.loads(result_file.read_text())
+        except (OSError, json.JSONDecodeError) as error:
+            print(f"skipped {result_file}: unreadable ({error})", file=sys.stderr)
+            continue
         groups.setdefault((result["env"], bool(result["randomized_training"])), []).append(result)
     return groups
 
@@ -88,13 +92,13 @@ def plot(groups: dict[tuple[str, bool], list[dict]], path: Path) -> None:
         axis.plot(centres, mean, color=colours[randomized], label=label)
         axis.fill_between(centres, mean - spread, mean + spread, color=colours[randomized], alpha=0.2)
         scripted = np.mean([run["evaluations"]["nominal"]["scripted"]["return_mean"] for run in runs])
-        axis.axhline(scripted, color="tab:gray", linestyle="--", linewidth=1)
-    axis.text(0.01, 0.97, "dashed: scripted controller, nominal vehicle", transform=axis.transAxes, va="top")
+        scripted_label = "scripted controller (nominal vehicle)" if not randomized else None
+        axis.axhline(scripted, color="tab:gray", linestyle="--", linewidth=1, label=scripted_label)
     envs = sorted({env for env, _ in groups})
     axis.set_title(f"PPO on {', '.join(envs)}: episode return (training episodes)")
     axis.set_xlabel("environment steps")
     axis.set_ylabel("episode return (mean over seeds, +- std)")
-    axis.legend(loc="lower right")
+    axis.legend(loc="center right")
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
