@@ -98,7 +98,7 @@ def plot(groups: dict[tuple[str, bool], list[dict]], path: Path) -> None:
     axis.set_title(f"PPO on {', '.join(envs)}: episode return (training episodes)")
     axis.set_xlabel("environment steps")
     axis.set_ylabel("episode return (mean over seeds, +- std)")
-    axis.legend(loc="center right")
+    axis.legend(loc="best")
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
