@@ -155,7 +155,7 @@ CASES = {
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_the_batch_gives_what_one_robot_environments_give_across_resets(case):
     env_id, options = CASES[case]
-    n, length = 3, 20
+    n, length = 2, 12
     batched = gymnasium.make_vec(env_id, num_envs=n, max_episode_steps=length, flat_obs=True, **options)
     sync = gymnasium.make_vec(
         env_id, num_envs=n, vectorization_mode="sync", max_episode_steps=length, flat_obs=True, **options

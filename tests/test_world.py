@@ -504,3 +504,24 @@ def test_a_mirror_shows_a_cameras_own_frame_so_nothing_is_left_out_then():
     everything, without = images_with_and_without_the_frame()
     assert (np.abs(everything.astype(int) - without.astype(int)).max(axis=2) > 0).sum() > 1000
     sim.close()
+
+
+def test_the_texture_noise_is_the_middle_of_an_upsampled_three_by_three_tiling():
+    # the fast path (two wrapped cells of padding) against the literal construction it replaces
+    import cv2
+
+    from maptidal.envs.textures import _noise
+
+    # at small upsampling factors OpenCV's resize rounds a few pixels one float32 ulp apart between the
+    # two sizes; at the textures' own size (1024 px, the default octaves) every pixel is the same
+    cases = [(size, (4, 16, 32), (0.5, 0.3, 0.2), 1e-6) for size in (64, 96, 100)]
+    cases.append((1024, (4, 16, 64, 256), (0.4, 0.25, 0.2, 0.15), 0.0))
+    for size, octaves, weights, tolerance in cases:  # 100: not a multiple of every octave (literal path)
+        got = _noise(np.random.default_rng(3), size, octaves, weights)
+        rng = np.random.default_rng(3)
+        want = np.zeros((size, size), np.float32)
+        for cells, weight in zip(octaves, weights, strict=True):
+            tiled = np.tile(rng.random((cells, cells)).astype(np.float32), (3, 3))
+            up = cv2.resize(tiled, (3 * size, 3 * size), interpolation=cv2.INTER_CUBIC)
+            want += weight * up[size : 2 * size, size : 2 * size]
+        np.testing.assert_allclose(got, np.clip(want, 0.0, 1.0), rtol=0, atol=tolerance)
