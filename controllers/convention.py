@@ -101,12 +101,13 @@ class PilotGain:
 
     def apply(self, command: np.ndarray) -> np.ndarray:
         """The command as ArduSub's RC channels carry it: surge, sway and yaw times ``gain``, heave times
-        ``gain x throttle_gain``, clipped to [-1, 1]; roll and pitch unchanged."""
+        ``gain x throttle_gain``, clipped to [-1, 1]; roll and pitch unchanged. ``command`` is one (6,)
+        command or an (N, 6) batch of them."""
         if self.gain == 1.0 and self.throttle_gain == 1.0:
             return command
         scaled = np.array(command, float)
-        scaled[[0, 1, 5]] *= self.gain
-        scaled[2] *= self.gain * self.throttle_gain
+        scaled[..., [0, 1, 5]] *= self.gain
+        scaled[..., 2] *= self.gain * self.throttle_gain
         return scaled.clip(-1.0, 1.0)
 
 

@@ -72,8 +72,9 @@ class VehicleModel:
         return self.thrust_curve.thrust_from_command(c, self.pwm_range)
 
     def body_force(self, commands) -> np.ndarray:
-        """The body-frame force (N, x y z) that mixed thruster commands in [-1, 1] (M1 first) give."""
-        return _force_matrix(self) @ self.thruster_forces(commands)
+        """The body-frame force (N, x y z) that mixed thruster commands in [-1, 1] (M1 first) give; an
+        (N, n_thrusters) batch of commands gives (N, 3)."""
+        return self.thruster_forces(commands) @ _force_matrix(self).T
 
     def motion_model(self) -> MotionModel:
         """The translational part of this model, for dead reckoning without a DVL

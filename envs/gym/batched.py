@@ -41,7 +41,6 @@ from maptidal.controllers.batched import (
     cross_rows,
     mix_batch,
 )
-from maptidal.controllers.pose import _force_matrix
 from maptidal.controllers.thrusters import linearise_thrusters
 from maptidal.envs.gym.core import CONTACT_COST_PER_S, MAX_EPISODE_S, POSITION_TOLERANCE_M, YAW_TOLERANCE_RAD
 from maptidal.envs.sensors import SENSORS
@@ -178,7 +177,6 @@ class BatchedPoseEnv(VectorEnv):
         self._ctrl = slice(
             first.sim._ctrl_adr[self.robot], first.sim._ctrl_adr[self.robot] + self.n_thrusters
         )
-        self._force_matrix_t = _force_matrix(self.vehicle_model).T  # thruster forces (N) to body force
         n = num_envs
         self.outputs = np.zeros((n, self.n_thrusters))
         self.accel_bias, self.gyro_bias = np.zeros((n, 3)), np.zeros((n, 3))
@@ -300,7 +298,7 @@ class BatchedPoseEnv(VectorEnv):
         active = ~self._autoreset
         rows = np.flatnonzero(active)
         energy, touching = np.zeros(self.num_envs), np.zeros(self.num_envs)
-        pilot = a if self.thrusters_action else self.pilot_gain_rows(a)
+        pilot = a if self.thrusters_action else self.pilot_gain.apply(a)
         noise = self._draw_noise(rows)
         blowing = [self.envs[row] for row in rows if self.envs[row].episode_turbulence_m_s > 0]
         for period in range(self.periods_per_step):
@@ -332,16 +330,6 @@ class BatchedPoseEnv(VectorEnv):
             observations = self._observation()
         self._autoreset = terminated | truncated
         return observations, rewards, terminated, truncated, infos
-
-    def pilot_gain_rows(self, actions: np.ndarray) -> np.ndarray:
-        """The pilot commands after ArduSub's pilot gain (:meth:`PilotGain.apply`, row by row)."""
-        gain = self.pilot_gain
-        if gain.gain == 1.0 and gain.throttle_gain == 1.0:
-            return actions
-        scaled = actions.copy()
-        scaled[:, [0, 1, 5]] *= gain.gain
-        scaled[:, 2] *= gain.gain * gain.throttle_gain
-        return scaled.clip(-1.0, 1.0)
 
     def _drive(self, pilot: np.ndarray) -> None:
         """One control period's thruster commands, into each robot's actuators."""
@@ -417,13 +405,10 @@ class BatchedPoseEnv(VectorEnv):
         valid = np.all((ranges >= low) & (ranges <= high), axis=1)
         velocity = raw[:, s["velocimeter"]] + noise[:, 13:16]
         heading = (headings_from_field(raw[:, s["magnetometer"]], up_body) + noise[:, 16]) % 360.0
-        thrust = None if valid.all() else self._thrust_force(self.outputs)  # needed without a DVL lock
+        # the commanded force is read only where a DVL has no lock
+        thrust = None if valid.all() else self.vehicle_model.body_force(self.outputs)
         self.estimator.update(accel, gyro, depth, heading, valid, velocity, thrust, self.period_s)
         self.readings = {"accel": accel, "gyro": gyro, "depth_m": depth}
-
-    def _thrust_force(self, outputs: np.ndarray) -> np.ndarray:
-        """The body force (N) the commands ask for (VehicleModel.body_force, row by row)."""
-        return self.vehicle_model.thruster_forces(outputs) @ self._force_matrix_t
 
     # ----- observations and rewards -----------------------------------------------------------
     def _observation(self):
