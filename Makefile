@@ -7,7 +7,9 @@ RUN_DIR ?= runs/mission
 # the tests run in this many processes (pytest-xdist): the machines have 2 cores, and the suite's heavy
 # missions wait on each other's drawing; TEST_WORKERS=0 runs them in this one process. Each test module
 # runs whole on one worker (--dist loadscope), so that a module's shared mission (a module-scoped
-# fixture) is flown once, not once per worker that gets one of its tests
+# fixture) is flown once, not once per worker that gets one of its tests. The modules go out in the
+# order tests/conftest.py puts them, the slowest first (xdist's own reorder, by test count, sent the
+# slowest module, which has few tests, out last, and one worker idled while it ran)
 TEST_WORKERS ?= 2
 
 # Headless rendering through EGL works on CPU-only machines (Mesa) and on NVIDIA GPUs.
@@ -25,8 +27,10 @@ $(STAMP): pyproject.toml requirements.lock envs/_hydro.c
 	# the lock is complete (every dependency pinned), so it installs without resolving: MAVProxy declares
 	# vtk, opencv-python and more for its GUI modules, which its console (all the tests use) does not need
 	# and which would clash with opencv-python-headless
-	$(BIN)/python -m pip install -q --no-deps -r requirements.lock
-	$(BIN)/python -m pip install -q --no-deps -e .
+	# --no-compile: byte-compiling every installed package took most of the setup's time; Python compiles
+	# the modules it imports, once, as it imports them
+	$(BIN)/python -m pip install -q --no-deps --no-compile -r requirements.lock
+	$(BIN)/python -m pip install -q --no-deps --no-compile -e .
 	# compile the C hydrodynamics callback (falls back to numpy when there is no compiler)
 	$(BIN)/python -c "from maptidal.envs.hydrodynamics import build_native; print('hydrodynamics library:', build_native())"
 	touch $(STAMP)
@@ -35,7 +39,7 @@ run: setup
 	$(BIN)/maptidal run --out $(RUN_DIR)
 
 test: setup
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) $(if $(filter 0,$(TEST_WORKERS)),,--dist loadscope)
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) $(if $(filter 0,$(TEST_WORKERS)),,--dist loadscope --no-loadscope-reorder)
 
 # the tests against real ArduSub firmware: ARDUSUB_SITL=/path/to/ardusub make sitl-test (README, SITL)
 sitl-test: setup

@@ -25,7 +25,9 @@ it) and adds five rules, each with its reason:
 4. **Free space from the robot's own map.** A viewpoint is kept only where the robot has seen water:
    its voxel lies between one of its cameras and the keyframe mesh that camera saw (space carving:
    :meth:`RobotMap.carve_view` draws the mesh into a depth image; nothing behind a wall or under the
-   floor is ever carved), no landmark lies within ``clearance_m`` of it, it is ``clearance_m`` below the
+   floor is ever carved), and so is the voxel ``clearance_m`` beneath it (the floor, seen at a grazing
+   angle, has sparse landmarks: a viewpoint a few cm above it can be far from all of them), no landmark
+   lies within ``clearance_m`` of it, it is ``clearance_m`` below the
    surface (the depth sensor's datum, ``surface_z``), and no landmark lies on its line of sight to the
    face. No tank model and no simulator truth is read. Water the robot has not yet seen is not free: a
    face seen at a grazing angle waits until the robot has seen the water in front of it.
@@ -62,6 +64,7 @@ __all__ = [
     "fit_planes",
     "near_teammates",
     "reachable_on_map",
+    "unpack_voxels",
     "voxel_keys",
 ]
 
@@ -107,6 +110,11 @@ class MapAwareParams:
     teammate_radius_m: float = 0.39
     teammate_speed_m_s: float = 0.25
     teammate_max_radius_m: float = 1.0
+    # how far a camera looking at open water is taken to have looked (RobotMap.looked_voxels): the depth
+    # at which one observation's depth error reaches 15 cm (z^2 x 0.25 / (196 x 0.075), 2.9 m), beyond
+    # which a surface would give landmarks too rough to map. Where a ray meets no surface this close, the
+    # water there was looked at and held nothing to see
+    look_range_m: float = 3.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -115,6 +123,7 @@ class MapAwareParams:
             "plane_tolerance_m",
             "voxel_m",
             "coverage_voxel_m",
+            "look_range_m",
         ):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
@@ -148,6 +157,14 @@ def _packed(keys: np.ndarray) -> np.ndarray:
     # one int64 per voxel (21 bits an axis, +-1M voxels): set operations on a 1-D array
     shifted = keys + (1 << 20)
     return (shifted[:, 0] << 42) | (shifted[:, 1] << 21) | shifted[:, 2]
+
+
+def unpack_voxels(packed) -> np.ndarray:
+    """The integer voxel coordinates ``(N, 3)`` of packed voxel keys (as in :attr:`RobotMap.free_voxels`),
+    in ascending key order."""
+    keys = np.sort(np.fromiter(packed, np.int64, len(packed)))
+    mask = (1 << 21) - 1
+    return np.column_stack([(keys >> 42) & mask, (keys >> 21) & mask, keys & mask]) - (1 << 20)
 
 
 def fit_planes(
@@ -209,15 +226,20 @@ def near_teammates(points: np.ndarray, teammates: np.ndarray | None, params: Map
 
 @dataclass
 class RobotMap:
-    """One robot's own map: fused landmarks by id, and the voxels its cameras have seen through.
+    """One robot's own map: fused landmarks by id, the voxels its cameras have seen through, and the
+    voxels they have looked at without meeting a surface.
 
     :meth:`add_keyframe` folds in a keyframe: the fused positions of the landmarks seen there (a landmark
     seen again moves to its newer, better-fused position) and the rays from the camera to them;
-    :meth:`carve_view` carves the water between the camera and the keyframe's mesh."""
+    :meth:`carve_view` carves the water between the camera and the keyframe's mesh, and marks as looked
+    at the water in its view, within ``look_range_m``, where no face of the mesh lies (open water, or a
+    surface too bare to map: not known to be free, but nothing more to see from there; exploration
+    uses it, :mod:`maptidal.exploration`)."""
 
     params: MapAwareParams = field(default_factory=MapAwareParams)
     landmarks: dict[int, np.ndarray] = field(default_factory=dict)
     free_voxels: set[int] = field(default_factory=set)
+    looked_voxels: set[int] = field(default_factory=set)
 
     def add_keyframe(
         self,
@@ -271,7 +293,8 @@ class RobotMap:
         camera's optical frame in the world (columns: right, down, forward); ``intrinsics`` has ``fx``,
         ``fy``, ``cx``, ``cy``, ``width`` and ``height``. The mesh is drawn into a depth image of
         ``cell_px`` pixel cells, each face at its nearest vertex's depth (so a face never claims water
-        beyond itself), the nearest face winning. Returns how many voxels were carved."""
+        beyond itself), the nearest face winning. The voxels in view within ``look_range_m`` whose pixel
+        shows no face are added to :attr:`looked_voxels`. Returns how many voxels were carved."""
         camera = np.asarray(camera_position, float).reshape(3)
         rotation = np.asarray(rotation, float).reshape(3, 3)
         vertices = np.asarray(mesh_vertices, float).reshape(-1, 3)
@@ -301,7 +324,7 @@ class RobotMap:
         # gives every cell the nearest depth about it, so that no voxel is carved beyond the mesh
         image = cv2.erode(image, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
         # the voxels of the view's bounding box, tested against the depth image
-        far = float(face_depth.max())
+        far = max(float(face_depth.max()), self.params.look_range_m)
         corners = np.array(
             [
                 [x, y, 1.0]
@@ -327,6 +350,9 @@ class RobotMap:
         surface[in_view] = image[line[in_view], column[in_view]]
         free = in_view & (surface > 0) & (z < surface - self.params.ray_stop_m)
         self.free_voxels.update(_packed(grid[free].astype(np.int64)).tolist())
+        # the whole voxel in view and in range, so that a voxel half beyond the range is not called looked
+        looked = in_view & (surface == 0) & (z < self.params.look_range_m - size)
+        self.looked_voxels.update(_packed(grid[looked].astype(np.int64)).tolist())
         return int(free.sum())
 
     def points(self) -> np.ndarray:
@@ -369,13 +395,17 @@ class MapAwareResult:
 def reachable_on_map(
     robot_map: RobotMap, rows: np.ndarray, standoff: float, tree: cKDTree | None = None
 ) -> np.ndarray:
-    """Rule 4: which viewpoint rows ``(N, 6)`` lie in water the robot has seen, clear of its map and of
-    the surface, with no landmark on the line of sight to the face ``standoff`` ahead."""
+    """Rule 4: which viewpoint rows ``(N, 6)`` lie in water the robot has seen, with water seen
+    ``clearance_m`` beneath them too, clear of its map and of the surface, with no landmark on the line of
+    sight to the face ``standoff`` ahead."""
     params = robot_map.params
     rows = np.asarray(rows, float).reshape(-1, 6)
     if len(rows) == 0:
         return np.zeros(0, bool)
     ok = robot_map.seen_free(rows[:, :3])
+    # water seen beneath the hull too: the floor is seen at a grazing angle, its landmarks are sparse,
+    # and a viewpoint a few cm above it can lie farther than clearance_m from every one of them
+    ok &= robot_map.seen_free(rows[:, :3] - [0.0, 0.0, params.clearance_m])
     if params.surface_z is not None:
         ok &= rows[:, 2] <= params.surface_z - params.clearance_m
     points = robot_map.points()

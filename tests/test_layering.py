@@ -21,6 +21,7 @@ INSTALLED_AS = {"maptidal": "maptidal", "envs": "maptidal.envs", "controllers": 
 ALGORITHMS = (
     "discovery",
     "map_discovery",
+    "exploration",
     "perception",
     "allocation",
     "comms",

@@ -83,8 +83,8 @@ MISSIONS = {  # id: (motion model error, relocalisation)
 
 @pytest.fixture(scope="module")
 def missions(tmp_path_factory):
-    """240 s, its own length, of the default mission (seed 2) for each of MISSIONS, run on first use (the
-    bounds below were first measured over 300 s; 240 s keeps the test suite within its time)."""
+    """180 s of the default mission (seed 2) for each of MISSIONS, run on first use (the bounds below were
+    first measured over 300 s, then 240 s; 180 s keeps the test suite within its time)."""
     done: dict[str, tuple[dict, object]] = {}
 
     def get(name: str) -> tuple[dict, object]:
@@ -95,7 +95,7 @@ def missions(tmp_path_factory):
             # the paper's discovery, as when these bounds were measured: its many tasks keep the robots
             # flying, and localisation under way is what is tested
             params = MissionParams(
-                duration_s=240.0,
+                duration_s=180.0,
                 seed=2,
                 motion_model_error=error,
                 relocalise=relocalise,
@@ -111,8 +111,8 @@ def missions(tmp_path_factory):
 
 def test_both_robots_stay_localised_over_a_mission(missions):
     """With the simulator's own coefficients: the robot without a DVL within 15 cm (median) and 60 cm
-    (worst) of the truth over 240 s, and doing its share (verified views); the robot with one within 5 cm
-    and 15 cm. Before relocalisation the robot without a DVL was 26 cm off (median) after 240 s, and
+    (worst) of the truth over the mission, and doing its share (verified views); the robot with one within
+    5 cm and 15 cm. Before relocalisation the robot without a DVL was 26 cm off (median) after 240 s, and
     growing."""
     document, _ = missions("exact-model")
     figures = document["localisation"]
@@ -120,7 +120,8 @@ def test_both_robots_stay_localised_over_a_mission(missions):
     assert figures["rov1"]["max_m"] < 0.6, figures
     assert figures["rov0"]["median_m"] < 0.05, figures
     assert figures["rov0"]["max_m"] < 0.15, figures
-    assert document["done_by_robot"]["rov1"]["verified"] >= 5, document["done_by_robot"]
+    # its share: the bound was 5 verified views in 240 s; at that rate 180 s gives 3.75
+    assert document["done_by_robot"]["rov1"]["verified"] >= 4, document["done_by_robot"]
 
 
 def test_with_its_motion_model_30pc_off_the_robot_still_works_by_relocalising(missions):

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from maptidal.cli import main
+from maptidal.envs.scenario import inside_tank
 from maptidal.evaluation.free_space import free_space_mask
 from maptidal.mission import run as run_module
 from maptidal.mission.config import load_mission
@@ -38,14 +39,18 @@ WRONG_TANK = TankModel(
 )
 
 
-def _fly(mode: str, out, duration_s: float = 40.0, apart: bool = True) -> tuple[Mission, dict]:
+def _fly(mode: str, out, duration_s: float = 55.0, apart: bool = True) -> tuple[Mission, dict]:
     scenario, _ = load_mission(None)
     if mode == "map-aware":  # the loop's tank-model check must not even be called
         run_module.reachable = _never
     mission = Mission(
         scenario,
         MissionParams(
-            duration_s=duration_s, seed=1, discovery_mode=mode, perception_process=apart, plots=False
+            duration_s=duration_s,
+            seed=1,
+            discovery_mode=mode,
+            perception_process=apart,
+            plots=False,
         ),
         out,
     )
@@ -79,6 +84,24 @@ def test_map_aware_discovery_does_not_need_the_tank_model(map_aware):
     assert free_space_mask(flown["real_tank"], rows).mean() >= 0.8
     # ... and the wrong tank calls most of them out of the water: had the loop asked it, they were gone
     assert free_space_mask(WRONG_TANK, rows).mean() < 0.5
+
+
+def test_robots_with_no_task_explore_their_own_maps_frontier_in_the_real_tanks_water(map_aware):
+    # the loop was told the wrong tank: the looks come from each robot's own map, and lie in the real
+    # tank's water with room for the hull, where the wrong tank would have most of them out of it
+    flown, out = map_aware
+    events = read_events(out)
+    looks = [e for e in events if e["kind"] == "surveying"]
+    assert looks, "no robot explored"
+    for look in looks:
+        assert inside_tank(flown["real_tank"], np.array(look["look"]), 0.3), look
+        assert look["gain_m3"] >= MissionParams().frontier.min_gain_m3
+    # mission.json counts each robot's surveys
+    assert flown["document"]["surveys"] == {
+        name: sum(e["robot"] == name for e in looks) for name in flown["document"]["surveys"]
+    }
+    outside = [not inside_tank(WRONG_TANK, np.array(look["look"]), 0.3) for look in looks]
+    assert np.mean(outside) >= 0.5
 
 
 def test_each_keyframe_reports_what_each_rule_removed(map_aware):
@@ -118,3 +141,69 @@ def test_each_robots_map_grows_the_same_in_the_worker_process_and_inline(map_awa
     _, inline = _fly("map-aware", tmp_path / "inline", apart=False)
     assert inline["document"]["parallel"]["perception"] == "inline"
     assert inline["document"]["tasks"] == flown["document"]["tasks"]
+    looks = [e for e in read_events(tmp_path / "inline") if e["kind"] == "surveying"]
+    assert looks == [e for e in read_events(map_aware[1]) if e["kind"] == "surveying"]
+
+
+def test_an_idle_robot_surveys_its_best_look_waits_for_a_teammate_and_then_has_explored(tmp_path):
+    scenario, _ = load_mission(None)
+    params = MissionParams(duration_s=1.0, perception_process=False, plots=False)
+    mission = Mission(scenario, params, tmp_path)
+    try:
+        robot = mission.robots["rov0"]
+        robot.activity, robot.survey_ended_s = "idle", 10.0
+        # its looks are worked out on a frame taken before its last sweep ended: stale, it waits
+        robot.frontier, robot.frontier_frame_s = np.array([[-1.0, 0.5, 1.0, 3.0, 2.0, 1.5]]), 9.0
+        mission._explore(robot, 11.0)
+        assert robot.activity == "idle" and not robot.explored
+        # a fresh one: it flies to the look and sweeps there, and its centre ends at the look
+        robot.frontier_frame_s = 10.5
+        mission._explore(robot, 11.0)
+        assert robot.activity == "survey" and robot.surveyed[-1] == pytest.approx([-1.0, 0.5, 1.0])
+        end = robot.route.at(robot.route.duration + 1.0)
+        assert end.position == pytest.approx([-1.0, 0.5, 1.0]) and end.yaw == pytest.approx(3.0)
+        # no look left but those by a teammate: it waits, up to the task timeout, then has explored
+        robot.activity, robot.frontier, robot.frontier_held = "idle", np.zeros((0, 6)), 3
+        mission._explore(robot, 20.0)
+        assert not robot.explored and robot.frontier is None
+        robot.frontier = np.zeros((0, 6))
+        mission._explore(robot, 10.0 + params.task_timeout_s + 1.0)
+        assert robot.explored
+        # none at all: explored at once
+        other = mission.robots["rov1"]
+        other.activity, other.survey_ended_s = "idle", 0.0
+        other.frontier, other.frontier_frame_s, other.frontier_held = np.zeros((0, 6)), 1.0, 0
+        mission._explore(other, 2.0)
+        assert other.explored
+    finally:
+        mission.perception.close()
+        mission._gl.submit(mission.sim.close).result()
+        mission._gl.shutdown()
+    kinds = [(e["kind"], e.get("robot")) for e in read_events(tmp_path)]
+    assert ("surveying", "rov0") in kinds and ("explored", "rov0") in kinds and ("explored", "rov1") in kinds
+
+
+def test_a_robot_that_stops_short_of_its_viewpoint_gives_the_task_up_only_once_still_for_stall_s(tmp_path):
+    scenario, _ = load_mission(None)
+    params = MissionParams(duration_s=1.0, perception_process=False, plots=False)
+    mission = Mission(scenario, params, tmp_path)
+    try:
+        robot = mission.robots["rov0"]
+        here = np.array([-1.0, 0.0, 1.0])
+        assert not mission._stalled(robot, here, True, 100.0)  # it starts watching
+        assert not mission._stalled(robot, here + [0.04, 0.0, 0.0], True, 100.0 + params.stall_s - 0.1)
+        # 4 cm in 10 s: stuck
+        assert mission._stalled(robot, here + [0.04, 0.0, 0.0], True, 100.0 + params.stall_s)
+        # moving on resets the watch; so do reaching the goal, giving way and being lost
+        assert not mission._stalled(robot, here + [0.2, 0.0, 0.0], True, 111.0)
+        assert not mission._stalled(robot, here + [0.2, 0.0, 0.0], True, 111.0 + params.stall_s - 0.1)
+        assert not mission._stalled(robot, here + [0.2, 0.0, 0.0], False, 130.0)
+        robot.yielding = True
+        assert not mission._stalled(robot, here, True, 140.0)
+        assert not mission._stalled(robot, here, True, 140.0 + 2 * params.stall_s)
+    finally:
+        mission.perception.close()
+        mission._gl.submit(mission.sim.close).result()
+        mission._gl.shutdown()
+    with pytest.raises(ValueError, match="stall_s"):
+        MissionParams(stall_s=-1.0)

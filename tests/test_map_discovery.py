@@ -217,6 +217,23 @@ def test_viewpoints_behind_a_wall_under_the_floor_or_at_the_surface_are_refused(
     assert reachable_on_map(robot_map, rows, 1.0).tolist() == [True, False, False, False, False]
 
 
+def test_a_viewpoint_needs_water_seen_beneath_it_where_the_floor_has_few_landmarks():
+    # a dense wall at x = 3 and a floor at z = 0 with a landmark only every 1.2 m, seen at a grazing
+    # angle: a viewpoint 20 cm above the floor, on the ray to a floor landmark, is farther than the
+    # clearance from every landmark, but the water beneath it was never seen
+    rng = np.random.default_rng(8)
+    wall = _plane_points([3, 0, 0], [0, 1, 0], [0, 0, 1], 4.0, 2.0, 0.05, rng)
+    xs, ys = np.meshgrid(np.arange(-1.2, 3.0, 1.2), np.arange(-0.4, 4.5, 1.2))
+    floor = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)])
+    points = np.vstack([wall, floor])
+    robot_map = _map_of(points, np.arange(len(points)), np.array([0.0, 2.0, 1.0]))
+    rows = np.array([[2.0, 2.0, 1.0, 1, 0, 0], [1.92, 2.0, 0.2, 1, 0, 0]])
+    nearest = np.min(np.linalg.norm(points[:, None] - rows[None, :, :3], axis=2), axis=0)
+    assert nearest[1] > robot_map.params.clearance_m  # the landmarks alone would let it pass
+    assert robot_map.seen_free(rows[:, :3]).all()  # and it lies in water a grazing ray crossed
+    assert reachable_on_map(robot_map, rows, 1.0).tolist() == [True, False]
+
+
 def test_a_landmark_on_the_line_of_sight_blocks_the_view():
     rng = np.random.default_rng(7)
     points, _, camera = _wall_scene(rng)

@@ -482,10 +482,10 @@ def test_after_a_failure_the_survivor_finishes_every_task_and_the_mission_ends(t
     """With coarse discovery parameters (r_ex 3 m, theta_ex 1.2 rad: a handful of tasks) the whole
     mission can finish. rov1 fails at 27 s while flying to a task; once the 40 s failure timeout has
     passed the survivor takes that task and does it, every task is done or given up with its reason
-    (declined, or timed out), and the mission ends before its time limit. (Both robots carry a DVL, so
-    that the survivor can fly what it takes.) The limit, 450 s, only needs to leave room: since the tank
-    was closed (session 16) the survivor also finds views of the far end wall, and ended at 376 s when
-    measured, where it ended before 300 s in the open tank."""
+    (declined, timed out, stalled, or lost with rov1), and the mission ends before its time limit.
+    (Both robots carry a DVL, so that the survivor can fly what it takes.) The limit, 450 s, only needs
+    to leave room: since the tank was closed (session 16) the survivor also finds views of the far end
+    wall, and ended at 376 s when measured, where it ended before 300 s in the open tank."""
     import dataclasses
 
     from maptidal.discovery import DiscoveryParams
@@ -503,6 +503,7 @@ def test_after_a_failure_the_survivor_finishes_every_task_and_the_mission_ends(t
         events=(MissionEvent(FAIL_AT, "fail", "rov1"),),
         perception_process=False,
         plots=False,
+        explore=False,  # the handover is what is tested; exploring its frontier adds some 300 s of flight
     )
     document = Mission(scenario, params, tmp_path).run()
     assert document["finished"] and document["sim_time_s"] < 450.0
@@ -513,8 +514,11 @@ def test_after_a_failure_the_survivor_finishes_every_task_and_the_mission_ends(t
     events = read_events(tmp_path)
     # every task is done, or given up by the survivor with its reason in the log: declined (a view it
     # cannot pitch to) or timed out (since session 15, two views a hull's width from the ladder's rails)
-    given_up = {e["task"] for e in events if e["kind"] in ("declined", "timeout") and e["robot"] == "rov0"}
-    assert document["tasks"] and all(t["completed"] or t["id"] in given_up for t in document["tasks"])
+    kinds = ("declined", "timeout", "stalled")
+    given_up = {e["task"] for e in events if e["kind"] in kinds and e["robot"] == "rov0"}
+    # ... or died with rov1, found in its last seconds and never heard by the survivor (tasks_lost)
+    lost = set(document["tasks_lost"]["rov1"]["lost_ids"])
+    assert document["tasks"] and all(t["completed"] or t["id"] in given_up | lost for t in document["tasks"])
     assert sum(t["completed"] for t in document["tasks"]) > len(given_up)
     flying = [e for e in events if e["kind"] == "flying" and e["robot"] == "rov1" and e["t"] < FAIL_AT]
     done_by_rov1 = {e["task"] for e in events if e["kind"] == "done" and e["robot"] == "rov1"}

@@ -39,7 +39,8 @@ def register(commands) -> None:
         "--duration",
         type=positive_float,
         metavar="S",
-        help="simulated seconds (default: the scenario's, else 240)",
+        help="the most simulated seconds: the mission ends sooner when its work is done (default: the "
+        "scenario's, else 600)",
     )
     run.add_argument("--seed", type=int, default=0, help="seed of the sensor and camera noise (default 0)")
     run.add_argument(
@@ -60,6 +61,12 @@ def register(commands) -> None:
         "map-aware): map-aware works on each robot's own fused map and free space and reads no tank "
         "model; paper runs the paper's Algorithms 1-3 on each keyframe's mesh, its tasks then kept where "
         "the tank model's water is free",
+    )
+    run.add_argument(
+        "--no-explore",
+        action="store_true",
+        help="map-aware robots with no task left do not fly to their own map's frontier to look there "
+        "(default: they do, within the scenario's explore_radius_m of where each was launched)",
     )
     run.add_argument(
         "--video",
@@ -123,6 +130,11 @@ def register(commands) -> None:
         help="the maptidal planner's discovery mode (default: the scenario's, else map-aware)",
     )
     batch.add_argument(
+        "--no-explore",
+        action="store_true",
+        help="map-aware robots with no task left do not explore their map's frontier (as run's)",
+    )
+    batch.add_argument(
         "--no-plots",
         action="store_true",
         help="leave out each mission's own PNG plots (the batch still draws its figures); `maptidal "
@@ -148,6 +160,7 @@ def run_mission(args: argparse.Namespace) -> int:
         args.seed,
         planner=args.planner,
         discovery=args.discovery,
+        explore=False if args.no_explore else None,
     )
     if args.video:
         params = dataclasses.replace(params, video=True)
@@ -215,6 +228,7 @@ def run_batch_command(args: argparse.Namespace) -> int:
         planners=planners,
         discovery=args.discovery,
         plots=not args.no_plots,
+        explore=False if args.no_explore else None,
     )
     several = planners is not None and len(planners) > 1
     print(planners_markdown(summary, len(seeds)) if several else batch_markdown(summary, len(rows)))

@@ -86,6 +86,7 @@ class BatchRun:
     planner: str | None = None
     discovery: str | None = None
     plots: bool = True
+    explore: bool | None = None
 
 
 def parse_planners(text: str) -> list[str]:
@@ -132,6 +133,7 @@ def run_one(run: BatchRun) -> dict:
         run.seed,
         planner=run.planner,
         discovery=run.discovery,
+        explore=run.explore,
     )
     if not run.plots:
         params = dataclasses.replace(params, plots=False)
@@ -339,10 +341,11 @@ def run_batch(
     planners: list[str] | None = None,
     discovery: str | None = None,
     plots: bool = True,
+    explore: bool | None = None,
 ) -> tuple[list[dict], dict]:
     """Fly a mission per seed (module docstring), or per planner and seed; returns the rows in order
     (planner, then seed) and the aggregate (one per planner with several planners). ``plots=False``
-    leaves out each mission's own PNG plots.
+    leaves out each mission's own PNG plots; ``explore`` overrides the mission file's ``explore``.
 
     The mission file is checked here, before any run starts, so a bad one fails at once."""
     from maptidal.mission.config import prepare_mission
@@ -351,7 +354,9 @@ def run_batch(
         raise ValueError("no seeds to run")
     several = planners is not None and len(planners) > 1
     for planner in planners or [None]:  # fail fast on a bad file, override or plan
-        prepare_mission(scenario, robots, duration_s, pose_source, planner=planner, discovery=discovery)
+        prepare_mission(
+            scenario, robots, duration_s, pose_source, planner=planner, discovery=discovery, explore=explore
+        )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     runs = [
@@ -365,6 +370,7 @@ def run_batch(
             planner,
             discovery,
             plots,
+            explore,
         )
         for planner in planners or [None]
         for seed in seeds

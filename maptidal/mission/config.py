@@ -14,6 +14,8 @@
     water_backend = "prefer-gl"  # where the water model runs: prefer-gl, gl, cpu or auto (Simulation's)
     planner = "maptidal"   # where tasks come from: maptidal (discovered), voronoi or boustrophedon
     discovery = "map-aware"  # maptidal's discovery in the loop: map-aware (the robot's own map) or paper
+    explore = true         # map-aware robots with no task fly to their map's frontier (false: they do not)
+    explore_radius_m = 3.0 # ... within this of where each was launched (maptidal.exploration)
     [[mission.events]]
     time_s = 60
     kind = "fail"          # rov1 stops and falls silent
@@ -47,6 +49,7 @@ from maptidal.envs.scenario import (
     read_scenario_file,
     scenario_from_dict,
 )
+from maptidal.exploration import FrontierParams
 from maptidal.mission.run import MissionEvent, MissionParams, check_events
 
 DEFAULT_MISSION = SCENARIO_DIR / "mission.toml"
@@ -65,6 +68,8 @@ MISSION_KEYS = {
     "water_backend",
     "planner",
     "discovery",
+    "explore",
+    "explore_radius_m",
 }
 # the [mission] keys that are not plain numbers, and what they must be
 SETTING_TYPES: dict[str, type] = {
@@ -75,6 +80,7 @@ SETTING_TYPES: dict[str, type] = {
     "render_samples": int,
     "perception_process": bool,
     "relocalise": bool,
+    "explore": bool,
 }
 EVENT_KEYS = {"time_s", "kind", "robot", "current", "duration_s", "robots"}
 
@@ -126,6 +132,11 @@ def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
     settings["events"] = tuple(events)
     if "discovery" in settings:  # MissionParams.discovery holds the paper's parameters; this is the mode
         settings["discovery_mode"] = settings.pop("discovery")
+    if "explore_radius_m" in settings:
+        try:
+            settings["frontier"] = FrontierParams(explore_radius_m=float(settings.pop("explore_radius_m")))
+        except ValueError as err:
+            raise ValueError(f"{path}: [mission] {err}") from None
     return scenario, settings
 
 
@@ -137,10 +148,11 @@ def prepare_mission(
     seed: int = 0,
     planner: str | None = None,
     discovery: str | None = None,
+    explore: bool | None = None,
 ) -> tuple[Scenario, MissionParams]:
     """The scenario and the MissionParams of a mission file, with the command line's overrides: the first
-    ``robots`` robots, the duration, the front end's pose source, the planner and the discovery mode
-    (``maptidal run`` and ``batch``)."""
+    ``robots`` robots, the duration, the front end's pose source, the planner, the discovery mode and
+    whether robots explore (``maptidal run`` and ``batch``)."""
     scenario, settings = load_mission(path)
     if robots is not None:
         if not 1 <= robots <= len(scenario.robots):
@@ -154,6 +166,8 @@ def prepare_mission(
         settings["planner"] = planner
     if discovery is not None:
         settings["discovery_mode"] = discovery
+    if explore is not None:
+        settings["explore"] = explore
     params = MissionParams(seed=seed, **settings)
     check_events(params.events, [r.name for r in scenario.robots])
     return scenario, params

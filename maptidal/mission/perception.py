@@ -26,6 +26,7 @@ import numpy as np
 
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
 from maptidal.executors import release_in_child, signals_held
+from maptidal.exploration import FrontierParams, explore_views
 from maptidal.map_discovery import RobotMap, discover_on_map
 from maptidal.perception.frontend import FrontEnd
 from maptidal.perception.recording import CameraPose
@@ -49,6 +50,19 @@ class FrameJob:
     # where each teammate's last message put it, and how old that message was: rows (x, y, z, age_s);
     # map-aware discovery leaves a teammate out of the map (maptidal.map_discovery.near_teammates)
     teammates: np.ndarray | None = None
+    # a robot with no task and exploring left asks for its next looks (maptidal.exploration)
+    explore: ExploreRequest | None = None
+
+
+@dataclass(frozen=True)
+class ExploreRequest:
+    """What the next-look search (:func:`maptidal.exploration.explore_views`) needs beyond the map: its
+    settings, the robot's launch point (the centre of the region to explore) and the places it surveyed
+    already ``(M, 3)``."""
+
+    params: FrontierParams
+    launch: np.ndarray
+    visited: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -70,6 +84,11 @@ class FrameResult:
     discovery_s: float
     # map-aware discovery: how many candidates each of its rules removed (MapAwareResult.counts)
     rules: dict[str, int] | None = None
+    # the robot's next looks, best first, when the job asked for them: rows (x, y, z, yaw, gain_m3,
+    # utility) of the camera (maptidal.exploration.explore_views); none left: the robot has explored
+    frontier: np.ndarray | None = None
+    # with no look in ``frontier``: how many were left out only for being near a teammate
+    held_for_teammates: int = 0
 
 
 def perceive(
@@ -77,7 +96,8 @@ def perceive(
 ) -> FrameResult:
     """Run ``front`` on ``job``'s frame and, at a keyframe, discovery on its mesh: the paper's
     (:func:`maptidal.discovery.discover`), or, given the robot's own ``robot_map``, the map-aware one
-    (:func:`maptidal.map_discovery.discover_on_map`), after folding the keyframe into that map."""
+    (:func:`maptidal.map_discovery.discover_on_map`), after folding the keyframe into that map; and, when
+    the job asks, the robot's next looks on that map (:func:`maptidal.exploration.explore_views`)."""
     start = time.perf_counter()
     record, keyframe = front.process(0, job.time_s, job.left, job.right, job.pose)
     correction, sigma = None, None
@@ -117,6 +137,20 @@ def perceive(
         discovery_s = time.perf_counter() - start
     else:
         discovery_s = 0.0
+    frontier, held_for_teammates = None, 0
+    if job.explore is not None and robot_map is not None:
+        start = time.perf_counter()
+        request = job.explore
+        frontier = explore_views(
+            robot_map, job.pose.position, request.params, request.launch, job.teammates, request.visited
+        )
+        if len(frontier) == 0 and job.teammates is not None and len(job.teammates):
+            # none left but near a teammate: the robot waits for it to move on, it has not explored
+            alone = explore_views(
+                robot_map, job.pose.position, request.params, request.launch, None, request.visited
+            )
+            held_for_teammates = len(alone)
+        discovery_s += time.perf_counter() - start
     return FrameResult(
         job.robot,
         job.time_s,
@@ -128,6 +162,8 @@ def perceive(
         perception_s,
         discovery_s,
         rules,
+        frontier,
+        held_for_teammates,
     )
 
 

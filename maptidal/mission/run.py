@@ -63,11 +63,12 @@ from maptidal.envs.world import camera_offsets
 from maptidal.evaluation.baselines import boustrophedon_viewpoints, voronoi_viewpoints
 from maptidal.evaluation.coverage import CoverageModel, CoverageParams, SeenVoxels
 from maptidal.evaluation.free_space import free_space_mask
+from maptidal.exploration import FrontierParams
 from maptidal.map_discovery import MapAwareParams, RobotMap
 from maptidal.mission.capture import camera_pose_from_body
 from maptidal.mission.clearance import waiting_point
 from maptidal.mission.outputs import MissionWriter
-from maptidal.mission.perception import FrameJob, FrameResult, start_perception
+from maptidal.mission.perception import ExploreRequest, FrameJob, FrameResult, start_perception
 from maptidal.mission.sharing import sharing_table, tasks_lost
 from maptidal.mission.verification import check_view, pitch_to_fly, view_pitch
 from maptidal.mission.video import MissionVideo
@@ -133,7 +134,12 @@ class MissionParams:
     """How the mission runs (module docstring). Images are rendered at ``image_size`` (width, height) with
     the OAK-D's field of view, smaller than the front end's default to keep the mission fast."""
 
-    duration_s: float = 240.0
+    # a cap: the mission ends when its work is done (``_finished``). The work of the default mission, by
+    # estimate: the first sweep (27 s); some ten looks at the frontier between two robots, each a flight
+    # of up to 6 m at 0.25 m/s and a sweep (45 s each, 225 s a robot); some ten tasks of about 20 s
+    # (100 s a robot): some 350 s. Twice that, rounded, so that a mission that does its work ends on its
+    # own, and one that does not is stopped before it runs on for long
+    duration_s: float = 600.0
     frame_rate_hz: float = 1.0
     # go-to-pose runs on the companion computer and streams its pilot commands at 10 Hz, ArduSub's usual
     # rate (its pilot failsafe, FS_PILOT_TIMEOUT, waits 3 s; docs/references.md); the flight mode inside
@@ -180,6 +186,13 @@ class MissionParams:
     speed_m_s: float = 0.25
     dwell_s: float = 1.0
     task_timeout_s: float = 60.0
+    # a robot whose route to a task has ended, that is not at the viewpoint and that has not moved
+    # stall_move_m on its own estimate for stall_s, is pressed against something it cannot see (a thin
+    # rail, a teammate) and gives the task up: go-to-pose closes the last 15 cm in a few seconds when
+    # nothing is in the way, and a robot pushing on for the whole task timeout collided for up to a
+    # minute a task (README, "Exploring the map's frontier"). 0 turns it off
+    stall_s: float = 10.0
+    stall_move_m: float = 0.05
     # a task is held, and judged, within these of its viewpoint and viewing direction (in full, pitch
     # included: maptidal.mission.verification)
     position_tolerance_m: float = 0.15
@@ -222,6 +235,17 @@ class MissionParams:
     # uses only what the robot sensed. `maptidal discover` stays paper-exact either way
     discovery_mode: str = "map-aware"
     map_aware: MapAwareParams = field(default_factory=MapAwareParams)
+    # a map-aware robot with no task left flies to its own map's frontier and looks there, within
+    # frontier.explore_radius_m of where it was launched (maptidal.exploration); it has explored when
+    # no look is worth a trip. Only with the maptidal planner and map-aware discovery: the paper's
+    # discovery finds tasks enough to keep its robots flying, and a baseline's plan is fixed
+    explore: bool = True
+    frontier: FrontierParams = field(default_factory=FrontierParams)
+
+    @property
+    def exploring(self) -> bool:
+        """Whether robots explore their map's frontier (``explore``, with map-aware discovery)."""
+        return self.explore and self.planner == "maptidal" and self.discovery_mode == "map-aware"
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.duration_s) and 0 < self.duration_s <= MAX_DURATION_S):
@@ -266,6 +290,8 @@ class MissionParams:
             raise ValueError(f"motion_model_error must be in [0, 1), got {self.motion_model_error!r}")
         if not (math.isfinite(self.lost_sigma_m) and self.lost_sigma_m > 0):
             raise ValueError(f"lost_sigma_m must be positive, got {self.lost_sigma_m!r}")
+        if not (math.isfinite(self.stall_s) and self.stall_s >= 0 and math.isfinite(self.stall_move_m)):
+            raise ValueError(f"stall_s must be finite and >= 0, stall_move_m finite; got {self.stall_s!r}")
         if not (math.isfinite(self.clearance_m) and self.clearance_m >= 0):
             raise ValueError(f"clearance_m must be finite and >= 0, got {self.clearance_m!r}")
         check_render_samples(self.render_samples)
@@ -325,7 +351,7 @@ class _Robot:
     controller: PoseController
     left_offset: np.ndarray
     centre: np.ndarray
-    activity: str = "explore"  # explore, fly, hold, idle, failed
+    activity: str = "explore"  # explore (its first sweep), fly, survey, idle, waiting, failed
     route: Route | None = None
     goal: PoseReference | None = None  # where the route to the current task ends
     view: tuple[np.ndarray, np.ndarray] | None = None  # the current task's viewpoint and direction
@@ -336,8 +362,18 @@ class _Robot:
     task_key: int | None = None
     task_started_s: float = 0.0
     within_since_s: float | None = None
-    explored: bool = False
+    # where its estimate last moved stall_move_m from, and when (MissionParams.stall_s)
+    still_at: tuple[np.ndarray, float] | None = None
+    explored: bool = False  # its first sweep made and, when exploring, no look left worth a trip
     skipped: set = field(default_factory=set)
+    # exploration (MissionParams.explore): its latest next looks and the time of the frame they were
+    # worked out on; the places it surveyed; when its last survey ended (a look from an older frame is
+    # stale: it was worked out before that survey's views)
+    frontier: np.ndarray | None = None
+    frontier_frame_s: float = -math.inf
+    frontier_held: int = 0  # with no look left: how many were left out for being near a teammate
+    surveyed: list = field(default_factory=list)
+    survey_ended_s: float = -math.inf
     has_dvl: bool = True
     frame_every_s: float = 1.0
     next_frame_s: float = 0.0
@@ -904,8 +940,17 @@ class Mission:
             self._camera_pose(robot, "dr"),
             existing,
             self._teammates_heard(robot, now),
+            self._explore_request(robot),
         )
         self._frames[robot.name] = self._gl.submit(self._draw_frame, snapshot, job)
+
+    def _explore_request(self, robot: _Robot) -> ExploreRequest | None:
+        """The robot's ask for its next looks: only when exploring is on and left to do, and the robot
+        is idle (it has no task to fly)."""
+        if not self.params.exploring or robot.explored or robot.activity != "idle":
+            return None
+        visited = np.array(robot.surveyed, float).reshape(-1, 3)
+        return ExploreRequest(self.params.frontier, robot.home_position.copy(), visited)
 
     def _add_plan(self, now: float) -> None:
         """Give every robot the planner's tasks, as a mission plan each was loaded with, and log them."""
@@ -941,6 +986,9 @@ class Mission:
             robot.xy_correction = result.xy_correction
             robot.position_sigma_m = result.position_sigma_m
         robot.visual_updates = result.visual_updates
+        if result.frontier is not None:
+            robot.frontier, robot.frontier_frame_s = result.frontier, result.time_s
+            robot.frontier_held = result.held_for_teammates
         if result.faces == 0 or self.params.planner != "maptidal":
             return  # a baseline's tasks are planned, not discovered: the frames serve localisation only
         start = time.perf_counter()
@@ -980,13 +1028,23 @@ class Mission:
         agent = self.auction.agents[robot.index]
         if robot.activity == "explore":
             if now - robot.route_start_s >= robot.route.duration:
-                robot.explored = True
                 robot.activity = "idle"
-                self.writer.event(now, "explored", robot=robot.name)
+                robot.survey_ended_s = now  # its next looks are worked out on the sweep's views
+                if not self.params.exploring:
+                    robot.explored = True
+                    self.writer.event(now, "explored", robot=robot.name)
+            return
+        if robot.activity == "survey":
+            timed_out = now - robot.task_started_s > self.params.task_timeout_s
+            if now - robot.route_start_s >= robot.route.duration or timed_out:
+                robot.activity = "idle"
+                robot.survey_ended_s, robot.frontier = now, None
+                self.writer.event(now, "surveyed", robot=robot.name, timed_out=timed_out)
             return
         if robot.activity == "idle":
             key = next((k for k in agent.path_keys() if k not in robot.skipped and agent.is_open(k)), None)
             if key is None:
+                self._explore(robot, now)
                 return
             task = next(t for t in agent.tasks if t.key == key)
             needed = view_pitch(task.direction)
@@ -1009,7 +1067,7 @@ class Mission:
             robot.goal = dataclasses.replace(robot.route.at(robot.route.duration), pitch=pitch)
             robot.view = (np.asarray(task.position, float), np.asarray(task.direction, float))
             robot.route_start_s, robot.task_started_s, robot.task_key = now, now, key
-            robot.within_since_s = None
+            robot.within_since_s, robot.still_at = None, None
             robot.activity = "fly"
             self.tasks.get(key, {})["assigned_to"] = robot.name
             self.writer.event(now, "flying", robot=robot.name, task=key)
@@ -1037,11 +1095,70 @@ class Mission:
                     self._capture(robot, key, now)
             else:
                 robot.within_since_s = None
+            if self._stalled(robot, estimate.position, arrived and not believed.verified, now):
+                robot.skipped.add(key)
+                agent.give_up(key, now)
+                robot.activity = "idle"
+                self.writer.event(now, "stalled", robot=robot.name, task=key, still_s=self.params.stall_s)
+                return
             if now - robot.task_started_s > self.params.task_timeout_s:
                 robot.skipped.add(key)
                 agent.give_up(key, now)  # it leaves this robot's bundle, so a teammate can win it
                 robot.activity = "idle"
                 self.writer.event(now, "timeout", robot=robot.name, task=key)
+
+    def _stalled(self, robot: _Robot, position: np.ndarray, short_of_goal: bool, now: float) -> bool:
+        """Whether a robot whose route has ended short of its goal has not moved ``stall_move_m`` for
+        ``stall_s`` (MissionParams). A robot giving way to a teammate, or lost, is waiting, not stalled."""
+        if not short_of_goal or robot.yielding or robot.lost or self.params.stall_s <= 0:
+            robot.still_at = None
+            return False
+        if robot.still_at is None or np.linalg.norm(position - robot.still_at[0]) > self.params.stall_move_m:
+            robot.still_at = (np.array(position, float), now)
+            return False
+        return now - robot.still_at[1] >= self.params.stall_s
+
+    def _explore(self, robot: _Robot, now: float) -> None:
+        """An idle robot with no task: fly to its best next look (``frontier``, worked out on a frame taken
+        since its last survey ended) and sweep its camera there as at the start; with no look left worth a
+        trip, it has explored. Looks left out only for being near a teammate are waited for, up to
+        ``task_timeout_s`` after its last survey (or sweep) ended."""
+        if not self.params.exploring or robot.explored:
+            return
+        if robot.frontier is None or robot.frontier_frame_s < robot.survey_ended_s:
+            return  # its next looks are on their way (``_explore_request``)
+        if len(robot.frontier) == 0:
+            if robot.frontier_held and now - robot.survey_ended_s <= self.params.task_timeout_s:
+                robot.frontier = None  # its looks are by a teammate: wait for it to move on, and ask again
+                return
+            robot.explored = True
+            self.writer.event(now, "explored", robot=robot.name, surveys=len(robot.surveyed))
+            return
+        x, y, z, yaw, gain, _ = robot.frontier[0]
+        goal = look = np.array([x, y, z])  # where the vehicle's centre stands for the look
+        estimate = self._estimate(robot)
+        sweep = math.radians(self.params.explore_yaw_deg)
+        limits = self._limits()
+        robot.route = Route(
+            [
+                PoseTrajectory(estimate.position.copy(), estimate.yaw, goal, yaw, limits),
+                PoseTrajectory(goal, yaw, goal, yaw + sweep, limits),
+                PoseTrajectory(goal, yaw + sweep, goal, yaw - sweep, limits),
+                PoseTrajectory(goal, yaw - sweep, goal, yaw, limits),
+            ]
+        )
+        robot.goal, robot.view = None, None
+        robot.route_start_s, robot.task_started_s = now, now
+        robot.surveyed.append(look)
+        robot.activity = "survey"
+        self.writer.event(
+            now,
+            "surveying",
+            robot=robot.name,
+            look=[round(float(v), 3) for v in look],
+            yaw_deg=round(math.degrees(yaw), 1),
+            gain_m3=round(float(gain), 3),
+        )
 
     def _capture(self, robot: _Robot, key: int, now: float) -> None:
         # the image of this moment, drawn and written on the GL thread while the physics steps on
@@ -1181,6 +1298,8 @@ class Mission:
             "done_by_robot": {
                 r.name: {"claimed": r.claimed, "verified": r.verified} for r in self.robots.values()
             },
+            # the places each robot flew to to look at its map's frontier (MissionParams.explore)
+            "surveys": {r.name: len(r.surveyed) for r in self.robots.values()},
             "comms": {
                 "messages": stats.transmissions,
                 "bytes": stats.bytes,

@@ -1,0 +1,271 @@
+"""Frontier exploration on a robot's own map (issue [loop], maptidal.exploration): the frontier, the gain of a
+look and the clearance of where it stands against literal per-voxel and per-ray constructions, and the
+choice of the next look in rooms built by hand."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from maptidal.exploration import (
+    FREE,
+    LOOKED,
+    OCCUPIED,
+    OUTSIDE,
+    UNKNOWN,
+    FrontierParams,
+    VoxelStates,
+    _clear_of_unseen,
+    _frontier,
+    explore_views,
+    look_gains,
+    voxel_states,
+)
+from maptidal.map_discovery import MapAwareParams, RobotMap, _packed, voxel_keys
+
+VOXEL = 0.15
+
+
+def _random_grid(seed: int, shape=(9, 8, 7)) -> VoxelStates:
+    rng = np.random.default_rng(seed)
+    states = rng.choice([UNKNOWN, FREE, FREE, FREE, LOOKED, OCCUPIED, OUTSIDE], size=shape).astype(np.int8)
+    return VoxelStates(states, np.array([-4, 3, -2]), VOXEL)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_frontier_is_every_free_or_looked_voxel_beside_an_unknown_one(seed):
+    grid = _random_grid(seed)
+    states = grid.states
+    expected = set()
+    for i, j, k in np.ndindex(*states.shape):
+        if states[i, j, k] not in (FREE, LOOKED):
+            continue
+        for d in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)):
+            a, b, c = i + d[0], j + d[1], k + d[2]
+            inside = 0 <= a < states.shape[0] and 0 <= b < states.shape[1] and 0 <= c < states.shape[2]
+            if not inside or states[a, b, c] == UNKNOWN:  # off the grid is unknown
+                expected.add((i, j, k))
+                break
+    assert {tuple(row) for row in _frontier(grid).tolist()} == expected
+
+
+@pytest.mark.parametrize("radius", [0.1, 0.2, 0.35])
+def test_a_stand_is_clear_when_every_voxel_within_the_radius_is_free(radius):
+    grid = _random_grid(7, shape=(8, 8, 8))
+    # mostly free, with occupied and looked-at voxels scattered: looked-at water may hide a bare surface
+    grid.states[(grid.states != OCCUPIED) & (grid.states != LOOKED)] = FREE
+    clear = _clear_of_unseen(grid, radius)
+    states = grid.states
+    for i, j, k in np.ndindex(*states.shape):
+        ok = states[i, j, k] == FREE
+        for a, b, c in np.ndindex(*states.shape):
+            if ok and ((a - i) ** 2 + (b - j) ** 2 + (c - k) ** 2) * VOXEL**2 <= radius**2 + 1e-12:
+                ok = states[a, b, c] == FREE
+        # a voxel near the grid's edge has neighbours off it, which are not free
+        reach = int(radius / VOXEL + 1e-9)
+        if min(i, j, k) < reach or max(i, j, k) > 7 - reach:
+            ok = False
+        assert clear[i, j, k] == ok, (i, j, k)
+
+
+def _literal_gain(grid: VoxelStates, position, yaw, params: FrontierParams) -> float:
+    """One look's unknown volume, ray by ray and sample by sample, as the docstring says."""
+    seen = set()
+    tan_h = math.tan(math.radians(params.hfov_deg) / 2)
+    tan_v = math.tan(math.radians(params.vfov_deg) / 2)
+    for a in np.linspace(-tan_h, tan_h, params.rays_across):
+        for u in np.linspace(-tan_v, tan_v, params.rays_up):
+            forward = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+            left = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+            ray = forward + a * left + u * np.array([0.0, 0.0, 1.0])
+            ray /= np.linalg.norm(ray)
+            depth = 0.5 * grid.size
+            while depth <= params.view_range_m + 1e-9:
+                point = np.asarray(position) + depth * ray
+                cell = np.floor(point / grid.size).astype(int) - grid.origin
+                cell = np.clip(cell, 0, np.array(grid.states.shape) - 1)
+                state = grid.states[tuple(cell)]
+                if state in (OCCUPIED, OUTSIDE):
+                    break
+                if state == UNKNOWN:
+                    seen.add(tuple(cell))
+                depth += grid.size
+    return len(seen) * grid.size**3
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_looks_gain_is_the_unknown_volume_its_rays_reach_before_a_surface(seed):
+    rng = np.random.default_rng(seed)
+    states = rng.choice([UNKNOWN, FREE, LOOKED, OCCUPIED], p=[0.45, 0.35, 0.15, 0.05], size=(30, 30, 20))
+    grid = VoxelStates(states.astype(np.int8), np.array([-15, -15, -10]), VOXEL)
+    params = FrontierParams(view_range_m=1.5, rays_across=4, rays_up=3)
+    positions = rng.uniform(-0.8, 0.8, size=(3, 3))
+    yaws = np.array([0.3, 2.0, -2.5])
+    gains = look_gains(grid, positions, yaws, params)
+    for n, position in enumerate(positions):
+        for y, yaw in enumerate(yaws):
+            assert gains[n, y] == pytest.approx(_literal_gain(grid, position, yaw, params), rel=1e-9)
+
+
+def _room() -> np.ndarray:
+    """Landmarks every 0.1 m on the walls and floor of a closed room 4 x 4 m, 2 m deep, centred on 0."""
+    g, h = np.arange(-2, 2.001, 0.1), np.arange(0, 2.001, 0.1)
+    walls = [[s * 2, y, z] for s in (-1, 1) for y in g for z in h]
+    walls += [[x, s * 2, z] for s in (-1, 1) for x in g for z in h]
+    walls += [[x, y, 0.0] for x in g for y in g]
+    return np.array(walls, float)
+
+
+def _look(robot_map: RobotMap, camera, yaw_deg: float, walls: np.ndarray) -> None:
+    """Fold into the map what a level camera at ``camera`` facing ``yaw_deg`` sees of ``walls``: the
+    landmarks in its field of view, and the water up to them (rays), as a keyframe does."""
+    offsets = walls - camera
+    bearing = np.degrees(np.arctan2(offsets[:, 1], offsets[:, 0])) - yaw_deg
+    bearing = (bearing + 180) % 360 - 180
+    elevation = np.degrees(np.arctan2(offsets[:, 2], np.hypot(offsets[:, 0], offsets[:, 1])))
+    seen = (np.abs(bearing) < 39) & (np.abs(elevation) < 27)
+    robot_map.add_keyframe(np.asarray(camera, float), np.flatnonzero(seen), walls[seen])
+
+
+def test_a_robot_that_looked_one_way_is_sent_to_look_the_other_way():
+    walls = _room()
+    robot_map = RobotMap(MapAwareParams(surface_z=2.0))
+    camera = np.array([-0.5, 0.0, 1.0])
+    _look(robot_map, camera, 0.0, walls)  # it has seen the +x half of the room
+    views = explore_views(robot_map, camera, launch=camera)
+    assert len(views) >= 1
+    best = views[0]
+    facing = np.array([math.cos(best[3]), math.sin(best[3])])
+    assert facing[0] < -0.5, best  # towards the half it has not seen
+    assert best[4] >= FrontierParams().min_gain_m3
+    # utility is the gain discounted by the distance to fly; the rows are best first
+    distance = np.linalg.norm(views[:, :3] - camera, axis=1)
+    assert views[:, 5] == pytest.approx(views[:, 4] * np.exp(-distance / FrontierParams().distance_scale_m))
+    assert np.all(np.diff(views[:, 5]) <= 1e-12)
+    # every look stands in water the robot has seen, clear of the map and of the surface
+    assert robot_map.seen_free(views[:, :3]).all()
+    nearest = np.min(np.linalg.norm(views[:, None, :3] - robot_map.points()[None], axis=2), axis=1)
+    assert np.all(nearest >= FrontierParams().clearance_m)
+    assert np.all(views[:, 2] <= 2.0 - FrontierParams().clearance_m)
+
+
+def test_a_room_seen_all_round_leaves_nothing_to_explore():
+    walls = _room()
+    robot_map = RobotMap(MapAwareParams(surface_z=2.0))
+    for x in (-1.0, 0.0, 1.0):
+        for y in (-1.0, 0.0, 1.0):
+            for z in (0.4, 1.0, 1.6):
+                for yaw in range(0, 360, 30):
+                    _look(robot_map, np.array([x, y, z]), yaw, walls)
+    assert len(explore_views(robot_map, np.zeros(3) + [0, 0, 1], launch=np.array([0.0, 0.0, 1.0]))) == 0
+
+
+def test_a_mapped_wall_stops_the_rays_and_an_unmapped_one_does_not():
+    # a robot in a corridor of seen water, facing a wall 1 m ahead: with the wall's landmarks mapped
+    # there is nothing to see that way; without them the water beyond counts as unknown
+    robot_map = RobotMap(MapAwareParams())
+    camera = np.array([0.0, 0.0, 1.0])
+    ys, zs = np.meshgrid(np.arange(-1.5, 1.51, 0.1), np.arange(0.0, 2.01, 0.1))
+    wall = np.column_stack([np.full(ys.size, 1.0), ys.ravel(), zs.ravel()])
+    robot_map.add_keyframe(camera, np.arange(len(wall)), wall)
+    params = FrontierParams(explore_radius_m=None)
+    grid = voxel_states(robot_map, params, pad_m=params.view_range_m)
+    mapped = look_gains(grid, camera[None], np.array([0.0]), params)[0, 0]
+    bare = RobotMap(MapAwareParams())
+    bare.free_voxels = set(robot_map.free_voxels)  # the same water seen, the wall not mapped
+    bare_grid = voxel_states(bare, params, pad_m=params.view_range_m)
+    unmapped = look_gains(bare_grid, camera[None], np.array([0.0]), params)[0, 0]
+    assert mapped < 0.02 and unmapped > 0.5, (mapped, unmapped)
+
+
+def test_looked_at_water_is_not_unknown():
+    # open water the camera looked at without meeting a surface is not worth a trip
+    robot_map = RobotMap(MapAwareParams())
+    camera = np.array([0.0, 0.0, 1.0])
+    wall = np.array([[1.0, y, z] for y in np.arange(-0.3, 0.31, 0.1) for z in np.arange(0.7, 1.31, 0.1)])
+    robot_map.add_keyframe(camera, np.arange(len(wall)), wall)
+    params = FrontierParams(explore_radius_m=None)
+    grid = voxel_states(robot_map, params, pad_m=params.view_range_m)
+    before = look_gains(grid, camera[None], np.array([math.pi]), params)[0, 0]
+    behind = np.array(
+        [
+            [-x, y, z]
+            for x in np.arange(0.3, 3.0, VOXEL)
+            for y in np.arange(-3, 3, VOXEL)
+            for z in np.arange(-2, 4, VOXEL)
+        ]
+    )
+    robot_map.looked_voxels = set(_packed(voxel_keys(behind, VOXEL)).tolist())
+    grid = voxel_states(robot_map, params, pad_m=params.view_range_m)
+    after = look_gains(grid, camera[None], np.array([math.pi]), params)[0, 0]
+    assert before > 1.0 and after < 0.1 * before, (before, after)
+
+
+def test_teammates_places_surveyed_and_the_region_bound_the_looks():
+    walls = _room()
+    robot_map = RobotMap(MapAwareParams(surface_z=2.0))
+    camera = np.array([-0.5, 0.0, 1.0])
+    _look(robot_map, camera, 0.0, walls)
+    params = FrontierParams()
+    views = explore_views(robot_map, camera, params, launch=camera)
+    best = views[0, :3]
+    # a teammate there: no look within the exclusion of it
+    teammate = np.array([[*best, 3.0]])
+    others = explore_views(robot_map, camera, params, launch=camera, teammates=teammate)
+    assert np.all(np.linalg.norm(others[:, :3] - best, axis=1) > params.teammate_exclusion_m)
+    # a place surveyed already is not surveyed again
+    again = explore_views(robot_map, camera, params, launch=camera, visited=best[None])
+    assert np.all(np.linalg.norm(again[:, :3] - best, axis=1) > params.visited_exclusion_m)
+    # a region of 0.5 m about the launch holds almost no unknown water: no look is worth a trip
+    small = FrontierParams(explore_radius_m=0.5)
+    assert len(explore_views(robot_map, camera, small, launch=camera)) == 0
+
+
+def test_an_empty_or_lost_map_gives_no_look():
+    assert explore_views(RobotMap(), np.zeros(3)).shape == (0, 6)
+    robot_map = RobotMap()
+    _look(robot_map, np.array([-0.5, 0.0, 1.0]), 0.0, _room())
+    assert explore_views(robot_map, np.array([np.nan, 0.0, 1.0])).shape == (0, 6)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"view_range_m": 0.0},
+        {"min_gain_m3": -1.0},
+        {"clearance_m": math.nan},
+        {"explore_radius_m": 0.0},
+        {"yaws": 0},
+        {"rays_across": 2.5},
+        {"hfov_deg": 200.0},
+        {"wall_margin_voxels": -1},
+    ],
+)
+def test_bad_exploration_settings_are_refused(bad):
+    with pytest.raises(ValueError, match="exploration"):
+        FrontierParams(**bad)
+
+
+def test_a_look_stands_over_water_seen_beneath_it_where_the_floor_has_few_landmarks():
+    # dense walls, a floor with a landmark only every 1.2 m, seen from 0.8 m up at a grazing angle: the
+    # water just above the floor is crossed by rays to the floor's few landmarks, but a stand there has
+    # no water seen 35 cm beneath it
+    g, h = np.arange(-2, 2.001, 0.1), np.arange(0, 2.001, 0.1)
+    walls = [[s * 2, y, z] for s in (-1, 1) for y in g for z in h]
+    walls += [[x, s * 2, z] for s in (-1, 1) for x in g for z in h]
+    xs, ys = np.meshgrid(np.arange(-1.8, 2.0, 1.2), np.arange(-1.8, 2.0, 1.2))
+    floor = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)])
+    landmarks = np.vstack([walls, floor])
+    robot_map = RobotMap(MapAwareParams(surface_z=2.0))
+    for yaw in range(0, 360, 45):
+        _look(robot_map, np.array([0.0, 0.0, 0.8]), yaw, landmarks)
+    params = FrontierParams(explore_radius_m=None, min_gain_m3=1e-3, max_views=1000, max_candidates=1000)
+    views = explore_views(robot_map, np.array([0.0, 0.0, 0.8]), params)
+    assert len(views)
+    assert np.all(views[:, 2] >= params.floor_clearance_m), views[:, 2].min()
+    without = dataclasses.replace(params, floor_clearance_m=0.0)
+    low = explore_views(robot_map, np.array([0.0, 0.0, 0.8]), without)
+    assert views[:, 2].min() > low[:, 2].min()  # without the rule, looks stand lower
