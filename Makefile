@@ -27,10 +27,10 @@ $(STAMP): pyproject.toml requirements.lock envs/_hydro.c
 	# the lock is complete (every dependency pinned), so it installs without resolving: MAVProxy declares
 	# vtk, opencv-python and more for its GUI modules, which its console (all the tests use) does not need
 	# and which would clash with opencv-python-headless
-	# --no-compile: byte-compiling every installed package took most of the setup's time; Python compiles
-	# the modules it imports, once, as it imports them
-	$(BIN)/python -m pip install -q --no-deps --no-compile -r requirements.lock
-	$(BIN)/python -m pip install -q --no-deps --no-compile -e .
+	# pip byte-compiles what it installs: keep it, since the tests' many processes would otherwise compile
+	# every module they import, each time (PYTHONDONTWRITEBYTECODE keeps Python from caching them)
+	$(BIN)/python -m pip install -q --no-deps -r requirements.lock
+	$(BIN)/python -m pip install -q --no-deps -e .
 	# compile the C hydrodynamics callback (falls back to numpy when there is no compiler)
 	$(BIN)/python -c "from maptidal.envs.hydrodynamics import build_native; print('hydrodynamics library:', build_native())"
 	touch $(STAMP)
@@ -39,6 +39,9 @@ run: setup
 	$(BIN)/maptidal run --out $(RUN_DIR)
 
 test: setup
+	# our own modules compiled once: with PYTHONDONTWRITEBYTECODE set, each of the tests' many processes
+	# would compile every one it imports, each time
+	$(BIN)/python -m compileall -q maptidal envs controllers tests > /dev/null
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) $(if $(filter 0,$(TEST_WORKERS)),,--dist loadscope --no-loadscope-reorder)
 
 # the tests against real ArduSub firmware: ARDUSUB_SITL=/path/to/ardusub make sitl-test (README, SITL)

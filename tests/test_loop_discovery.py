@@ -6,6 +6,7 @@ mode, where the paper mode would have kept few of them (it keeps what the tank m
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 
 import numpy as np
@@ -145,11 +146,22 @@ def test_each_robots_map_grows_the_same_in_the_worker_process_and_inline(map_awa
     assert looks == [e for e in read_events(map_aware[1]) if e["kind"] == "surveying"]
 
 
-def test_an_idle_robot_surveys_its_best_look_waits_for_a_teammate_and_then_has_explored(tmp_path):
+@contextlib.contextmanager
+def _mission_at_rest(out):
+    """A default mission built but not flown, its robots' state to set by hand; closed on the way out."""
     scenario, _ = load_mission(None)
     params = MissionParams(duration_s=1.0, perception_process=False, plots=False)
-    mission = Mission(scenario, params, tmp_path)
+    mission = Mission(scenario, params, out)
     try:
+        yield mission, params
+    finally:
+        mission.perception.close()
+        mission._gl.submit(mission.sim.close).result()
+        mission._gl.shutdown()
+
+
+def test_an_idle_robot_surveys_its_best_look_waits_for_a_teammate_and_then_has_explored(tmp_path):
+    with _mission_at_rest(tmp_path) as (mission, params):
         robot = mission.robots["rov0"]
         robot.activity, robot.survey_ended_s = "idle", 10.0
         # its looks are worked out on a frame taken before its last sweep ended: stale, it waits
@@ -175,19 +187,12 @@ def test_an_idle_robot_surveys_its_best_look_waits_for_a_teammate_and_then_has_e
         other.frontier, other.frontier_frame_s, other.frontier_held = np.zeros((0, 6)), 1.0, 0
         mission._explore(other, 2.0)
         assert other.explored
-    finally:
-        mission.perception.close()
-        mission._gl.submit(mission.sim.close).result()
-        mission._gl.shutdown()
     kinds = [(e["kind"], e.get("robot")) for e in read_events(tmp_path)]
     assert ("surveying", "rov0") in kinds and ("explored", "rov0") in kinds and ("explored", "rov1") in kinds
 
 
 def test_a_robot_that_stops_short_of_its_viewpoint_gives_the_task_up_only_once_still_for_stall_s(tmp_path):
-    scenario, _ = load_mission(None)
-    params = MissionParams(duration_s=1.0, perception_process=False, plots=False)
-    mission = Mission(scenario, params, tmp_path)
-    try:
+    with _mission_at_rest(tmp_path) as (mission, params):
         robot = mission.robots["rov0"]
         here = np.array([-1.0, 0.0, 1.0])
         assert not mission._stalled(robot, here, True, 100.0)  # it starts watching
@@ -201,9 +206,8 @@ def test_a_robot_that_stops_short_of_its_viewpoint_gives_the_task_up_only_once_s
         robot.yielding = True
         assert not mission._stalled(robot, here, True, 140.0)
         assert not mission._stalled(robot, here, True, 140.0 + 2 * params.stall_s)
-    finally:
-        mission.perception.close()
-        mission._gl.submit(mission.sim.close).result()
-        mission._gl.shutdown()
+        robot.yielding, robot.lost = False, True
+        assert not mission._stalled(robot, here, True, 200.0)
+        assert not mission._stalled(robot, here, True, 200.0 + 2 * params.stall_s)
     with pytest.raises(ValueError, match="stall_s"):
         MissionParams(stall_s=-1.0)
