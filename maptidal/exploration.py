@@ -212,11 +212,10 @@ def _clear_of_unseen(grid: VoxelStates, radius_m: float) -> np.ndarray:
     """Which voxels have every voxel within ``radius_m`` (centre to centre) free: water seen through, all
     round."""
     free = grid.states == FREE
-    water = free
     reach = math.floor(radius_m / grid.size + 1e-9)
     if reach == 0:
         return free
-    padded = np.pad(water, reach, constant_values=False)
+    padded = np.pad(free, reach, constant_values=False)
     clear = free.copy()
     n0, n1, n2 = free.shape
     for offset in np.ndindex(2 * reach + 1, 2 * reach + 1, 2 * reach + 1):
@@ -242,8 +241,9 @@ def look_gains(
     grid: VoxelStates, positions: np.ndarray, yaws: np.ndarray, params: FrontierParams
 ) -> np.ndarray:
     """The unknown volume (m^3) each look sees: ``positions`` ``(N, 3)`` by ``yaws`` ``(Y,)`` gives
-    ``(N, Y)``. Each ray is sampled every half voxel to ``view_range_m`` and ends at its first occupied or
-    outside voxel; an unknown voxel counts once per look however many rays reach it."""
+    ``(N, Y)``. Each ray is sampled every voxel, from half a voxel out, to ``view_range_m``, and ends at
+    its first occupied or outside voxel; an unknown voxel counts once per look however many rays reach
+    it."""
     positions = np.asarray(positions, float).reshape(-1, 3)
     yaws = np.asarray(yaws, float).reshape(-1)
     if len(positions) == 0:
