@@ -13,11 +13,15 @@ sys.path.insert(0, str(Path(__file__).parent / "bench"))
 # leaves the other worker idle at the end. Collected first, the slow ones overlap each other and the many
 # quick ones fill in after (longest processing time first, Graham 1969).
 SLOWEST_FIRST = (
-    "test_localisation_loop.py",
     "test_mission.py",
+    "test_signals.py",
+    "test_localisation_loop.py",
     "test_batch.py",
-    "test_reward_exploits.py",
+    "test_mavlink.py",
+    "test_gym.py",
     "test_readme.py",
+    "test_frontend_rendered.py",
+    "test_reward_exploits.py",
 )
 
 

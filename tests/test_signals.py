@@ -108,13 +108,24 @@ def test_sigterm_on_a_mission_is_one_line_and_143(delay_s, tmp_path):
     assert gone
 
 
-# every long command besides run and batch, with arguments that keep it busy past 3 s on a fast machine
+# every long command besides run and batch, with arguments that keep it busy well past 3 s on a fast
+# machine (each took 9 to 23 s unsignalled on one where the defaults ended in 1.4 to 4 s, before the
+# signal came); the signal ends them all within 3 s, so the extra work costs nothing
+FINE = ["--occlusion", "--voxel", "0.02", "--capture", "sweep"]
 LONG_COMMANDS = {
-    "compare": ["compare", "--no-write", "--json", "--occlusion"],
-    "sim": ["sim", "--duration", "600", "--json"],
-    "noise-curve": ["noise-curve", "--json"],
-    "sweep": ["sweep", "--jobs", "2", "--no-plots", "--out", "{out}"],
-    "capture": ["capture", "--out", "{out}"],
+    "compare": ["compare", "--no-write", "--json", "--keyframes", "rendered", *FINE],
+    "sim": ["sim", "--duration", "3000", "--json"],
+    "noise-curve": [
+        "noise-curve",
+        "--json",
+        "--levels",
+        "0,0.1,0.2,0.3,0.4,0.5,0.6,0.7,0.8,0.9",
+        *FINE,
+        "--out",
+        "{out}",
+    ],
+    "sweep": ["sweep", "--jobs", "2", "--no-plots", *FINE, "--out", "{out}"],
+    "capture": ["capture", "--frame-rate", "20", "--out", "{out}"],
 }
 # two moments per command, drawn once (seeded): one in the imports and set-up (0.2 to 1 s), one in the
 # work itself (2.5 to 3 s, before the quickest of them, compare, ends on a fast machine)
