@@ -266,23 +266,33 @@ def test_bad_actions_and_arguments_raise_before_anything_moves():
 
 
 def test_contacts_cost_the_same_in_the_batch():
-    # dived into the floor from just above it: the contact's cost is the one-robot environment's
+    # dived into the floor from just above it: the contact's cost is the one-robot environment's, also
+    # in steps where the other robot waits on its autoreset (row 1 is reset again at step 4, so the rows
+    # end their 12-step episodes 4 steps apart, and at step 13 row 1 is on the floor while row 0 resets)
     n = 2
     start = {"pose": (-2.0, 0.0, 0.35, 0.3)}
-    batched = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, flat_obs=True)
-    sync = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, vectorization_mode="sync", flat_obs=True)
+    limit = {"max_episode_steps": 12, "flat_obs": True}
+    batched = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, **limit)
+    sync = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, vectorization_mode="sync", **limit)
     try:
         batched.reset(seed=4, options=start)
         sync.reset(seed=4, options=start)
         actions = np.tile(np.array([0.2, 0.0, -1.0, 0.0, 0.0, 0.0], np.float32), (n, 1))
-        touched = 0.0
-        for _ in range(25):
+        touched, touched_alone = 0.0, 0.0
+        for step in range(1, 26):
+            if step == 4:
+                again = {**start, "reset_mask": np.array([False, True])}
+                batched.reset(seed=9, options=again)
+                sync.reset(seed=9, options=again)
             _, got_reward, *_, got_info = batched.step(actions)
             _, want_reward, *_, want_info = sync.step(actions)
             np.testing.assert_allclose(got_reward, want_reward, atol=1e-6)
             np.testing.assert_allclose(got_info["contact_s"], want_info["contact_s"])
             touched += float(got_info["contact_s"].sum())
+            if step == 13:
+                touched_alone += float(got_info["contact_s"][1])
         assert touched > 0.5  # it did touch the floor, for a while
+        assert touched_alone > 0.0  # and touched it while row 0 waited on its reset
     finally:
         batched.close()
         sync.close()

@@ -345,9 +345,12 @@ class BatchedPoseEnv(VectorEnv):
                     outputs, self.controller_curve.curve, self.controller_curve.pwm_range
                 )
         self.outputs = np.asarray(outputs, float)
-        normalised = np.empty_like(self.outputs)
-        for plant, rows in self._plant_groups:
-            normalised[rows] = plant.normalised_thrust(self.outputs[rows])
+        if len(self._plant_groups) == 1:  # every robot on one thrust curve (no randomisation)
+            normalised = self._plant_groups[0][0].normalised_thrust(self.outputs)
+        else:
+            normalised = np.empty_like(self.outputs)
+            for plant, rows in self._plant_groups:
+                normalised[rows] = plant.normalised_thrust(self.outputs[rows])
         controls = normalised * self._gains
         for ctrl, row_controls in zip(self._ctrl_views, controls, strict=True):
             ctrl[:] = row_controls
@@ -368,13 +371,21 @@ class BatchedPoseEnv(VectorEnv):
     def _advance(self, rows: np.ndarray, noise: np.ndarray) -> np.ndarray:
         """The physics of one control period for ``rows``, then the IMU biases' random walk (``noise``:
         this period's scaled normals); which rows touched something."""
-        touching = np.zeros(self.num_envs)
         substeps = self.substeps_per_period
         models, datas = self._models, self._datas
-        for row in rows:
-            data = datas[row]
-            mujoco.mj_step(models[row], data, nstep=substeps)
-            touching[row] = data.ncon > 0  # one robot in the tank: every contact is the robot's
+        # one robot in the tank: every contact is the robot's
+        if len(rows) == self.num_envs:  # the usual case, no row waiting on its reset: no indexing
+            contacts = []
+            for model, data in zip(models, datas, strict=True):
+                mujoco.mj_step(model, data, nstep=substeps)
+                contacts.append(data.ncon)
+            touching = (np.array(contacts) > 0).astype(float)
+        else:
+            touching = np.zeros(self.num_envs)
+            for row in rows.tolist():
+                data = datas[row]
+                mujoco.mj_step(models[row], data, nstep=substeps)
+                touching[row] = data.ncon > 0
         self.accel_bias += noise[:, 0:3]
         self.gyro_bias += noise[:, 3:6]
         return touching

@@ -30,9 +30,12 @@ def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float
     batch's very physics: a second batch reset with the same seed, whose robots get, period by period,
     the controls the batch gave its own (recorded as it ran) and are stepped by ``mj_step`` and nothing
     else, so both sides integrate the same states and contacts."""
-    batched = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
-    sync = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="sync")
-    twin = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
+    # no episode ends within the measurement: a batch row that reset would leave its bare twin, which
+    # is only stepped, on another trajectory (every side gets the same limit)
+    limit = {"max_episode_steps": 10 * (steps + 10)}
+    batched = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **limit)
+    sync = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="sync", **limit)
+    twin = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **limit)
     for vec in (batched, sync, twin):
         vec.reset(seed=0)
     sims = [env.sim for env in twin.envs]
