@@ -33,9 +33,11 @@ class ProgressBar:
         self._interactive = bool(getattr(self.stream, "isatty", lambda: False)())
 
     def advance(self, steps: int = 1, note: str = "") -> None:
-        """Record ``steps`` more finished steps and redraw."""
+        """Record ``steps`` more finished steps and redraw (a bar already full is not drawn again: work
+        that overshoots its count, such as a learner's last batch, would repeat the full bar's line)."""
+        was_full = self.done >= self.total
         self.done = min(self.total, self.done + steps)
-        if not self.enabled:
+        if not self.enabled or was_full:
             return
         fraction = self.done / self.total
         elapsed = time.monotonic() - self._start
