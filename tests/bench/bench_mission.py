@@ -100,8 +100,9 @@ def main() -> None:
     wall = document["wall_time_s"]
     print(f"renderer: {renderer}")
     print(
-        f"default mission, {len(scenario.robots)} robots, {args.duration:.0f} s simulated, frames at "
-        f"{params.frame_rate_hz:g} Hz, {params.image_size[0]}x{params.image_size[1]}"
+        f"default mission, {len(scenario.robots)} robots, {document['sim_time_s']:.0f} s simulated (cap "
+        f"{args.duration:.0f} s), frames at {params.frame_rate_hz:g} Hz, "
+        f"{params.image_size[0]}x{params.image_size[1]}"
     )
     print(f"floor (stepping + stereo renders only): {floor:6.1f}x real time")
     print(f"mission:                                {document['realtime_factor']:6.1f}x real time")
