@@ -80,7 +80,8 @@ def _signal_at(
 
 
 # moments drawn once over 0 to 3 s (seeded, so that a failure can be repeated), the import's first
-# second sampled densely: that is where the command used to lose the signal
+# second sampled densely: that is where the command used to lose the signal. The missions are given a
+# 600 s cap, far more than they fly in 3 s on any machine, so that the signal never comes after the end
 MOMENTS = sorted(
     np.random.default_rng(20261204).uniform([0.0] * 4 + [1.0] * 3, [1.0] * 4 + [3.0] * 3).round(2)
 )
@@ -89,7 +90,7 @@ MOMENTS = sorted(
 @pytest.mark.parametrize("delay_s", MOMENTS)
 def test_ctrl_c_at_any_moment_of_a_mission_is_one_line_and_130(delay_s, tmp_path):
     status, lines, err, gone = _signal_at(
-        ["run", "--duration", "60", "--out", str(tmp_path / "mission")], signal.SIGINT, delay_s
+        ["run", "--duration", "600", "--out", str(tmp_path / "mission")], signal.SIGINT, delay_s
     )
     assert status == 130, err
     assert len(lines) == 1 and "interrupted" in lines[0], err
@@ -100,7 +101,7 @@ def test_ctrl_c_at_any_moment_of_a_mission_is_one_line_and_130(delay_s, tmp_path
 @pytest.mark.parametrize("delay_s", [0.4, 2.0])
 def test_sigterm_on_a_mission_is_one_line_and_143(delay_s, tmp_path):
     status, lines, err, gone = _signal_at(
-        ["run", "--duration", "60", "--out", str(tmp_path / "mission")], signal.SIGTERM, delay_s
+        ["run", "--duration", "600", "--out", str(tmp_path / "mission")], signal.SIGTERM, delay_s
     )
     assert status == 143, err
     assert len(lines) == 1 and "terminated (SIGTERM)" in lines[0], err
