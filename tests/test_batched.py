@@ -4,6 +4,7 @@ and the batched environment against a ``SyncVectorEnv`` of one-robot environment
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import gymnasium
@@ -40,8 +41,11 @@ def test_sqrt_controllers_and_dead_zones_are_the_scalar_functions_row_by_row():
     np.testing.assert_array_equal(dead_zones(sticks, 0.1), [dead_zone(float(s), 0.1) for s in sticks])
 
 
-def test_batched_acpid_follows_acpid_through_resets_limits_and_nan():
+@pytest.mark.parametrize("without_integrator", [False, True])
+def test_batched_acpid_follows_acpid_through_resets_limits_and_nan(without_integrator):
     gains = (ATC_RATE_ROLL_PITCH, ATC_RATE_ROLL_PITCH, ATC_RATE_YAW)
+    if without_integrator:  # an axis with no integral term (ki 0), beside two with one
+        gains = (gains[0], dataclasses.replace(gains[1], ki=0.0), gains[2])
     n = 4
     batch = BatchedACPID(gains, n)
     scalar = [[ACPID(g) for g in gains] for _ in range(n)]
