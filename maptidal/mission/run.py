@@ -592,19 +592,21 @@ class Mission:
             max_speed=self.params.speed_m_s, max_accel=0.1, max_yaw_rate=rate, max_yaw_accel=rate
         )
 
+    def _sweep(self, position: np.ndarray, yaw: float) -> list[PoseTrajectory]:
+        """The exploration's yaw sweep at ``position``: from ``yaw`` to ``explore_yaw_deg`` either side
+        and back, holding the place."""
+        sweep, limits = math.radians(self.params.explore_yaw_deg), self._limits()
+        return [
+            PoseTrajectory(position, yaw, position, yaw + sweep, limits),
+            PoseTrajectory(position, yaw + sweep, position, yaw - sweep, limits),
+            PoseTrajectory(position, yaw - sweep, position, yaw, limits),
+        ]
+
     def _start_exploring(self, robot: _Robot, now: float) -> None:
         estimate = self._estimate(robot)
         here, yaw = estimate.position.copy(), estimate.yaw
         robot.home_position, robot.home_yaw = here.copy(), yaw
-        sweep = math.radians(self.params.explore_yaw_deg)
-        limits = self._limits()
-        robot.route = Route(
-            [
-                PoseTrajectory(here, yaw, here, yaw + sweep, limits),
-                PoseTrajectory(here, yaw + sweep, here, yaw - sweep, limits),
-                PoseTrajectory(here, yaw - sweep, here, yaw, limits),
-            ]
-        )
+        robot.route = Route(self._sweep(here, yaw))
         robot.route_start_s = now
 
     def _reference(self, robot: _Robot, now: float):
@@ -635,16 +637,9 @@ class Mission:
         to the heading it explored along, the view its map knows best; then the exploration's yaw sweep
         there, in case that view is bare (its estimate may be off, and the robot facing a blank wall)."""
         estimate = self._estimate(robot)
-        home, yaw, limits = robot.home_position, robot.home_yaw, self._limits()
-        sweep = math.radians(self.params.explore_yaw_deg)
-        robot.recovery = Route(
-            [
-                PoseTrajectory(estimate.position.copy(), estimate.yaw, home, yaw, limits),
-                PoseTrajectory(home, yaw, home, yaw + sweep, limits),
-                PoseTrajectory(home, yaw + sweep, home, yaw - sweep, limits),
-                PoseTrajectory(home, yaw - sweep, home, yaw, limits),
-            ]
-        )
+        home, yaw = robot.home_position, robot.home_yaw
+        way_home = PoseTrajectory(estimate.position.copy(), estimate.yaw, home, yaw, self._limits())
+        robot.recovery = Route([way_home, *self._sweep(home, yaw)])
         robot.lost_since_s = now
 
     def _teammates_heard(self, robot: _Robot, now: float) -> np.ndarray:
@@ -1135,18 +1130,10 @@ class Mission:
             self.writer.event(now, "explored", robot=robot.name, surveys=len(robot.surveyed))
             return
         x, y, z, yaw, gain, _ = robot.frontier[0]
-        goal = look = np.array([x, y, z])  # where the vehicle's centre stands for the look
+        look = np.array([x, y, z])  # where the vehicle's centre stands for the look
         estimate = self._estimate(robot)
-        sweep = math.radians(self.params.explore_yaw_deg)
-        limits = self._limits()
-        robot.route = Route(
-            [
-                PoseTrajectory(estimate.position.copy(), estimate.yaw, goal, yaw, limits),
-                PoseTrajectory(goal, yaw, goal, yaw + sweep, limits),
-                PoseTrajectory(goal, yaw + sweep, goal, yaw - sweep, limits),
-                PoseTrajectory(goal, yaw - sweep, goal, yaw, limits),
-            ]
-        )
+        way_there = PoseTrajectory(estimate.position.copy(), estimate.yaw, look, yaw, self._limits())
+        robot.route = Route([way_there, *self._sweep(look, yaw)])
         robot.goal, robot.view = None, None
         robot.route_start_s, robot.task_started_s = now, now
         robot.surveyed.append(look)
