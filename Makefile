@@ -21,7 +21,7 @@ export PYOPENGL_PLATFORM ?= egl
 setup: $(STAMP)
 
 # Idempotent: reinstalls only when the pins or the package metadata change.
-$(STAMP): pyproject.toml requirements.lock envs/_hydro.c
+$(STAMP): pyproject.toml requirements.lock envs/_hydro.c envs/_flight.c
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	# the lock is complete (every dependency pinned), so it installs without resolving: MAVProxy declares
@@ -31,8 +31,9 @@ $(STAMP): pyproject.toml requirements.lock envs/_hydro.c
 	# every module they import, each time (PYTHONDONTWRITEBYTECODE keeps Python from caching them)
 	$(BIN)/python -m pip install -q --no-deps -r requirements.lock
 	$(BIN)/python -m pip install -q --no-deps -e .
-	# compile the C hydrodynamics callback (falls back to numpy when there is no compiler)
+	# compile the C hydrodynamics callback and flight stack (numpy and Python take over without a compiler)
 	$(BIN)/python -c "from maptidal.envs.hydrodynamics import build_native; print('hydrodynamics library:', build_native())"
+	$(BIN)/python -c "from maptidal.envs.native_flight import library; print('flight library:', library())"
 	touch $(STAMP)
 
 run: setup

@@ -305,38 +305,47 @@ def build_native(force: bool = False) -> Path | None:
     Needs a C compiler (``$CC`` or ``cc``) and MuJoCo's headers, which the mujoco
     wheel ships. Failure is not an error: the numpy callback takes over.
     """
+    return build_library(_SOURCE, "hydro", force=force)
+
+
+def build_library(
+    source_path: Path, stem: str, force: bool = False, link_mujoco: bool = False
+) -> Path | None:
+    """Compile the C file ``source_path`` into a shared library named ``stem``, once per source and
+    MuJoCo version, in the first of :func:`build_dirs` that takes it; its path, or None without a
+    compiler. ``link_mujoco``: link against the mujoco wheel's own ``libmujoco`` (the one Python has
+    loaded, so the library calls the same MuJoCo, callbacks included)."""
     include = Path(mujoco.__file__).parent / "include"
-    source = _SOURCE.read_bytes()
+    try:
+        source = source_path.read_bytes()
+    except OSError as error:  # an install without the C source: the Python takes over
+        log.debug("no source for the %s library: %s", stem, error)
+        return None
     tag = hashlib.sha1(source + mujoco.__version__.encode()).hexdigest()[:12]
     suffix = sysconfig.get_config_var("SHLIB_SUFFIX") or ".so"
     compiler = os.environ.get("CC", "cc")
+    link: list[str] = []
+    if link_mujoco:
+        found = sorted(Path(mujoco.__file__).parent.glob("libmujoco*"))
+        if not found:
+            return None
+        library = found[0]
+        link = [f"-L{library.parent}", f"-l:{library.name}", f"-Wl,-rpath,{library.parent}"]
     for directory in build_dirs():
-        target = directory / f"hydro-{tag}{suffix}"
+        target = directory / f"{stem}-{tag}{suffix}"
         if target.exists() and not force:
             return target
         try:
             directory.mkdir(parents=True, exist_ok=True)
             partial = target.with_suffix(f".{os.getpid()}.tmp")
-            subprocess.run(
-                [
-                    compiler,
-                    "-O2",
-                    "-shared",
-                    "-fPIC",
-                    f"-I{include}",
-                    "-o",
-                    str(partial),
-                    str(_SOURCE),
-                    "-lm",
-                ],
-                check=True,
-                capture_output=True,
-                timeout=120,
-            )
+            # -ffp-contract=off: no fused multiply-adds, so the C computes what the Python reference does
+            command = [compiler, "-O2", "-ffp-contract=off", "-shared", "-fPIC", f"-I{include}"]
+            command += ["-o", str(partial), str(source_path), *link, "-lm"]
+            subprocess.run(command, check=True, capture_output=True, timeout=120)
             os.replace(partial, target)  # atomic: parallel builders never load a half-written file
             return target
         except (OSError, subprocess.SubprocessError) as err:
-            log.debug("cannot build the hydrodynamics library in %s: %s", directory, err)
+            log.debug("cannot build the %s library in %s: %s", stem, directory, err)
     return None
 
 

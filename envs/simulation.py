@@ -46,6 +46,7 @@ from maptidal.controllers.pose import VehicleModel
 from maptidal.controllers.thrusters import linearise_thrusters
 from maptidal.envs import hydrodynamics
 from maptidal.envs.gl_water import CameraGeometry
+from maptidal.envs.native_flight import NativeFlight, check_flight_backend, native_available
 from maptidal.envs.rendering import (
     check_render_samples,
     depth_coefficients,
@@ -57,7 +58,7 @@ from maptidal.envs.rendering import (
     renders_on_gpu,
     update_camera_scene,
 )
-from maptidal.envs.scenario import Scenario, check_current, load_scenario
+from maptidal.envs.scenario import MAX_CURRENT_M_S, Scenario, check_current, load_scenario
 from maptidal.envs.sensors import RobotSensors, SensorNoise
 from maptidal.envs.vehicle import VehicleParams
 from maptidal.envs.water import WaterModel, WaterParams, depth_to_range, worker_thread
@@ -164,8 +165,10 @@ class Simulation:
         mode_params: ModeParams | None = None,
         render_samples: int = 4,
         motion_model_error: float = 0.0,
+        flight_backend: str = "native",
     ) -> None:
         check_render_samples(render_samples)
+        check_flight_backend(flight_backend)
         if not (math.isfinite(motion_model_error) and 0.0 <= motion_model_error < 1.0):
             raise ValueError(f"motion_model_error must be in [0, 1), got {motion_model_error!r}")
         # how far off the coefficients of the estimators' motion models are (MotionModel.perturbed): 0,
@@ -249,6 +252,10 @@ class Simulation:
         self._free_scenes: queue.SimpleQueue[mujoco.MjvScene] = queue.SimpleQueue()
         # each camera's own-body geoms behind its near plane, left out of its scenes (no pixel changes)
         self._hidden_geoms: dict[str, np.ndarray] = {}
+        # the compiled flight stack (maptidal.envs.native_flight), where it builds and the hydrodynamics
+        # are the C callback; the Python below is its reference and the fallback
+        use_native = flight_backend == "native" and native_available(self.backend)
+        self._native = NativeFlight(self, PATH_STEP_M) if use_native else None
         self.reset()
 
     def close(self) -> None:
@@ -585,7 +592,74 @@ class Simulation:
         Robots without a command keep their last one. Raises :class:`SimulationError`
         if the state becomes NaN or MuJoCo reports a diverging acceleration.
         """
-        period = self.scenario.substeps * self.scenario.timestep_s
+        self.step_periods(commands, 1, mode)
+        return self.time
+
+    @property
+    def flight_backend(self) -> str:
+        """Which flight stack runs the control periods: "native" (C) or "python"."""
+        return "native" if self._native_ready() else "python"
+
+    def _native_ready(self) -> bool:
+        # the C loop calls mj_step, so the passive-force callback must be the C one too
+        return (
+            self._native is not None
+            and hydrodynamics.installed_backend() in ("native", None)
+            and self._native.supported()
+        )
+
+    def step_periods(
+        self,
+        commands: Mapping[str, object] | None = None,
+        n_periods: int = 1,
+        mode: str = "pilot",
+        currents=None,
+    ) -> np.ndarray:
+        """Hold ``commands`` for ``n_periods`` control periods, as that many :meth:`step` calls do, in one
+        call to the compiled flight stack where it runs (:attr:`flight_backend`).
+
+        ``currents``: None, or the water current (m/s, world) to set at the start of each period,
+        ``(n_periods, 3)``. Returns ``(n_periods, robots, 2)``: each robot's mean squared thruster
+        command (:meth:`thruster_outputs`) and whether it touched anything (1.0) at each period's end.
+        Raises :class:`SimulationError` if the state becomes NaN or diverges."""
+        n_periods = int(n_periods)
+        if n_periods < 1:
+            raise ValueError(f"n_periods must be at least 1, got {n_periods}")
+        if currents is not None:
+            currents = np.asarray(currents, float)
+            if currents.shape != (n_periods, 3):
+                raise ValueError(f"currents must be ({n_periods}, 3) m/s, got shape {currents.shape}")
+            speeds = np.sqrt((currents * currents).sum(axis=1))
+            if not (np.isfinite(speeds).all() and speeds.max() <= MAX_CURRENT_M_S):
+                for current in currents:  # the offending one, in check_current's words
+                    check_current(current)
+        self._take_commands(commands, mode)
+        if self._native_ready():
+            time_before = self.time
+            per_period, ran = self._native.run(n_periods, currents)
+            if ran < n_periods:
+                period = self.scenario.substeps * self.scenario.timestep_s
+                raise SimulationError(
+                    f"the physics state became NaN or diverged in the {self.scenario.substeps} steps after "
+                    f"t = {time_before + ran * period:.3f} s; "
+                    f"last thruster commands {self.data.ctrl.round(3).tolist()}. Reset the simulation."
+                )
+            return per_period
+        per_period = np.zeros((n_periods, len(self.robots), 2))
+        for t in range(n_periods):
+            if currents is not None:
+                self.set_current(currents[t])
+            self._fly_period()
+            touching = self._robots_touching() if self.data.ncon else set()
+            for k, robot in enumerate(self.robots):
+                outputs = self._thruster_outputs.get(robot)
+                if outputs is not None:
+                    per_period[t, k, 0] = sum(v * v for v in outputs.tolist()) / len(outputs)
+                per_period[t, k, 1] = robot in touching
+        return per_period
+
+    def _take_commands(self, commands: Mapping[str, object] | None, mode: str) -> None:
+        """The pilots' new commands to the autopilots, and direct commands to the thrusters."""
         for robot, command in (commands or {}).items():
             if robot not in self._slots:
                 raise KeyError(f"unknown robot {robot!r}; robots: {', '.join(self.robots)}")
@@ -593,6 +667,11 @@ class Simulation:
                 self._autopilots[robot].pilot = self.mode_params.pilot_gain.apply(pilot_command(command))
                 continue
             self._drive(robot, self.thruster_commands(robot, command, mode))
+
+    def _fly_period(self) -> None:
+        """One control period in Python (the compiled stack's reference): the flight modes, the
+        physics, the sensors and the estimates."""
+        period = self.scenario.substeps * self.scenario.timestep_s
         for robot, autopilot in self._autopilots.items():
             # the flight mode runs every control period, on the estimate from this moment's readings
             estimate = self._estimators[robot].state
@@ -605,7 +684,6 @@ class Simulation:
         self.advance_physics(self.scenario.substeps)
         for robot in self._estimators:
             self._update_estimate(robot)
-        return self.time
 
     def set_thrusters(self, robot: str, commands) -> None:
         """Set ``robot``'s thruster commands in [-1, 1] (M1 first) directly, for drivers that step the

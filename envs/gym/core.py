@@ -304,8 +304,19 @@ def gust_step(gust: np.ndarray, sigma_m_s: float, dt: float, rng: np.random.Gene
     """One control period of turbulence: the exact Ornstein-Uhlenbeck update of a gust (m/s, 3 axes),
     ``g exp(-dt / tau) + sigma sqrt(1 - exp(-2 dt / tau)) N(0, 1)`` per axis with tau =
     :data:`GUST_TIME_CONSTANT_S`, whose stationary standard deviation is ``sigma`` whatever ``dt``."""
+    return gust_steps(gust, sigma_m_s, dt, rng, 1)[0]
+
+
+def gust_steps(gust: np.ndarray, sigma_m_s: float, dt: float, rng: np.random.Generator, n: int) -> np.ndarray:
+    """``n`` control periods of :func:`gust_step`, ``(n, 3)``: the same gusts from the same generator as
+    ``n`` calls of it (a generator's normals are one sequence however they are asked for)."""
     decay = math.exp(-dt / GUST_TIME_CONSTANT_S)
-    return decay * np.asarray(gust, float) + rng.normal(size=3) * sigma_m_s * math.sqrt(1 - decay * decay)
+    kicks = rng.normal(size=(n, 3)) * sigma_m_s * math.sqrt(1 - decay * decay)
+    out = np.empty((n, 3))
+    previous = np.asarray(gust, float)
+    for k in range(n):
+        previous = out[k] = decay * previous + kicks[k]
+    return out
 
 
 class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
@@ -513,25 +524,35 @@ class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
             raise ValueError(f"action must be finite, got {a.tolist()}")
         a = a.clip(-1.0, 1.0)
         mode = "thrusters" if self.options.action == "thrusters" else "pilot"
-        energy, touching = 0.0, 0
-        for _ in range(self.substeps):
-            self._before_substep()
-            self.sim.step({self.robot: a}, mode=mode)
-            outputs = self.sim.thruster_outputs(self.robot)
-            energy += float(outputs @ outputs) / len(outputs)  # the mean squared command
-            touching += bool(self.sim.contacts())
-        self._energy = energy / self.substeps
-        self._contact_s = touching * self.scenario.control_period_s
+        # every control period of the step in one call (the compiled flight stack where it runs)
+        per_period = self.sim.step_periods({self.robot: a}, self.substeps, mode, self._substep_currents())
+        mine = per_period[:, 0, :].tolist()
+        self._energy = sum(row[0] for row in mine) / self.substeps  # the mean squared command
+        self._contact_s = sum(row[1] > 0 for row in mine) * self.scenario.control_period_s
         self._steps += 1
 
-    def _before_substep(self) -> None:
-        """Blow the turbulence for one control period (:func:`gust_step`) about the episode's current."""
+    def _substep_currents(self) -> np.ndarray | None:
+        """The water current of each control period of the step: the turbulence (:func:`gust_step`)
+        blown period by period about the episode's current; None without turbulence."""
         if self.episode_turbulence_m_s <= 0:
-            return
+            return None
+        period = self.scenario.control_period_s
+        gusts = gust_steps(self.gust, self.episode_turbulence_m_s, period, self.np_random, self.substeps)
+        self.gust = gusts[-1].copy()
+        return self.mean_current + gusts
+
+    def _next_current(self) -> np.ndarray:
+        """Blow the turbulence one control period on (:func:`gust_step`); the current it gives."""
         self.gust = gust_step(
             self.gust, self.episode_turbulence_m_s, self.scenario.control_period_s, self.np_random
         )
-        self.sim.set_current(self.mean_current + self.gust)
+        return self.mean_current + self.gust
+
+    def _before_substep(self) -> None:
+        """Blow the turbulence for one control period about the episode's current (the batched
+        environment's period loop)."""
+        if self.episode_turbulence_m_s > 0:
+            self.sim.set_current(self._next_current())
 
     # ----- observations -------------------------------------------------------------------
     def _observation_spaces(self) -> dict[str, spaces.Space]:
@@ -585,7 +606,7 @@ class MapTidalEnv(Restorable, EpisodeLength, gymnasium.Env):
         e = self._estimate
         offset_world = np.asarray(target, float) - e.position
         heading = rotation_from_rpy(0.0, 0.0, e.yaw)
-        return np.r_[heading.T @ offset_world, wrap_angle(target_yaw - e.yaw)]
+        return np.append(heading.T @ offset_world, wrap_angle(target_yaw - e.yaw))
 
     @property
     def _contact_cost(self) -> float:

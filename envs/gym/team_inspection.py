@@ -259,13 +259,14 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
                 raise ValueError(f"{name}: action must be {self.action_space[name].shape} finite values")
             commands[name] = np.clip(value, -1.0, 1.0)
         mode = "thrusters" if self.options.action == "thrusters" else "pilot"
-        energy, touching = 0.0, 0
-        for _ in range(self.substeps):
-            self._blow()
-            self.sim.step(commands, mode=mode)
-            for name in self.agents:
-                energy += float(np.mean(self.sim.thruster_outputs(name) ** 2))
-            touching += bool(self.sim.contacts())
+        currents = None
+        if self._turbulence_m_s > 0:
+            currents = np.array([self._next_current() for _ in range(self.substeps)])
+        # every control period of the step in one call (the compiled flight stack where it runs)
+        per_period = self.sim.step_periods(commands, self.substeps, mode, currents)
+        mine = [self.sim.robots.index(name) for name in self.agents]
+        energy = float(per_period[:, mine, 0].sum())  # mean squared commands, summed over periods and robots
+        touching = int((per_period[:, :, 1].max(axis=1) > 0).sum())  # periods with any robot in contact
         self._steps += 1
         new = self._look()
         contact_s = touching * self.scenario.control_period_s
@@ -278,9 +279,13 @@ class TeamInspectionEnv(Restorable, EpisodeLength, gymnasium.Env):
     def _blow(self) -> None:
         """One control period of the drawn turbulence, about the episode's current."""
         if self._turbulence_m_s > 0:
-            period = self.scenario.control_period_s
-            self._gust = gust_step(self._gust, self._turbulence_m_s, period, self.np_random)
-            self.sim.set_current(self._mean_current + self._gust)
+            self.sim.set_current(self._next_current())
+
+    def _next_current(self) -> np.ndarray:
+        """Blow the drawn turbulence one control period on; the current it gives."""
+        period = self.scenario.control_period_s
+        self._gust = gust_step(self._gust, self._turbulence_m_s, period, self.np_random)
+        return self._mean_current + self._gust
 
     def _fly_tasks(self, action):
         chosen = {}

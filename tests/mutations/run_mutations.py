@@ -1,7 +1,7 @@
 """Re-run the mutation lists of tests/README.md (M: physics, F: flight modes and estimator, V: done means
 seen, L: localisation, S: sharing discoveries, T: the closed tank, I: interrupts, B: the batched
-environment): apply each mutation to the source, run its group's tests, record which test fails first,
-and restore the file. Every mutation must be killed.
+environment, N: the compiled flight stack): apply each mutation to the source, run its group's tests,
+record which test fails first, and restore the file. Every mutation must be killed.
 
     python tests/mutations/run_mutations.py            # all
     python tests/mutations/run_mutations.py M3 F7      # some
@@ -29,6 +29,7 @@ FLIGHT_TESTS = [
     "tests/test_ardusub_loops.py",
     "tests/test_feedback.py",
     "tests/test_model_aided.py",
+    "tests/test_native_flight.py",
 ]
 VERIFICATION_TESTS = ["tests/test_done_means_seen.py", "tests/test_mission.py"]
 LOCALISATION_TESTS = ["tests/test_relocalisation.py", "tests/test_localisation_loop.py"]
@@ -36,6 +37,7 @@ SHARING_TESTS = ["tests/test_sharing.py", "tests/test_allocation.py"]
 TANK_TESTS = ["tests/test_closed_tank.py", "tests/test_world_geometry.py"]
 SIGNAL_TESTS = ["tests/test_signals.py"]
 BATCHED_TESTS = ["tests/test_batched.py"]
+NATIVE_TESTS = ["tests/test_native_flight.py"]
 TESTS_OF_GROUP = {
     "M": TESTS,
     "F": FLIGHT_TESTS,
@@ -45,6 +47,7 @@ TESTS_OF_GROUP = {
     "T": TANK_TESTS,
     "I": SIGNAL_TESTS,
     "B": BATCHED_TESTS,
+    "N": NATIVE_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -613,6 +616,138 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
     "B9": (
         "an autoresetting row keeps its last step's info",
         [("envs/gym/batched.py", "infos = _only_rows(infos, active)", "pass")],
+    ),
+    "N1": (
+        "the motion model without its Coriolis term",
+        [("envs/_flight.c", "force[k] = force[k] - turn[k];", "force[k] = force[k];")],
+    ),
+    "N2": (
+        "the yaw rate loop's output not negated",
+        [("envs/_flight.c", "out[5] = -rate_loop(p, s, 2", "out[5] = rate_loop(p, s, 2")],
+    ),
+    "N3": (
+        "the vectored-6DOF mixer without its roll-pitch-throttle normalisation",
+        [
+            (
+                "envs/_flight.c",
+                "out[i] = clip(rpt[i] / rpt_max + yfl[i] / yfl_max",
+                "out[i] = clip(rpt[i] + yfl[i] / yfl_max",
+            )
+        ],
+    ),
+    "N4": (
+        "the compass noise subtracted",
+        [
+            (
+                "envs/_flight.c",
+                "py_mod(heading + (0.0 + *P(COMPASS_SIGMA_DEG)",
+                "py_mod(heading - (0.0 + *P(COMPASS_SIGMA_DEG)",
+            )
+        ],
+    ),
+    "N5": (
+        "the forward power law's exponent taken from reverse",
+        [("envs/_flight.c", "pw[0] * pow(thrust, pw[1])", "pw[0] * pow(thrust, pw[3])")],
+    ),
+    "N6": (
+        "the depth hold never sees its throttle saturated",
+        [
+            (
+                "envs/_flight.c",
+                "*S(DZ_LIMIT) = heave > 1.0 ? 1 : (heave < -1.0 ? -1 : 0);",
+                "*S(DZ_LIMIT) = 0;",
+            )
+        ],
+    ),
+    "N7": (
+        "the horizontal hold's integrator bound ten times too wide",
+        [("envs/_flight.c", "if (norm > g[13]) integral[0]", "if (norm > 10 * g[13]) integral[0]")],
+    ),
+    "N8": (
+        "the horizontal hold's derivative of a sum",
+        [
+            (
+                "envs/_flight.c",
+                "deriv[0] = (err[0] - S(XY_LAST_ERROR)[0]) / dt",
+                "deriv[0] = (err[0] + S(XY_LAST_ERROR)[0]) / dt",
+            )
+        ],
+    ),
+    "N9": (
+        "the depth target allowed 1 m above the surface margin",
+        [("envs/_flight.c", "if (*S(DZ_TARGET) > ceiling)", "if (*S(DZ_TARGET) > ceiling + 1.0)")],
+    ),
+    "N10": (
+        "the depth sensor's lever arm added",
+        [
+            (
+                "envs/_flight.c",
+                "S(POSITION)[2] = *P(SURFACE_Z) - *S(R_DEPTH) - sensor_height;",
+                "S(POSITION)[2] = *P(SURFACE_Z) - *S(R_DEPTH) + sensor_height;",
+            )
+        ],
+    ),
+    "N11": (
+        "the gyro bias does not walk",
+        [
+            (
+                "envs/_flight.c",
+                "S(GYRO_BIAS)[k] += 0.0 + *P(GYRO_WALK) * root",
+                "S(GYRO_BIAS)[k] += 0.0 * *P(GYRO_WALK) * root",
+            )
+        ],
+    ),
+    "N12": (
+        "thrust never linearised",
+        [("envs/_flight.c", "if (*P(LINEARISE) != 0.0) {", "if (0) {")],
+    ),
+    "N13": (
+        "the vectored mixer without forward-vertical coupling",
+        [("envs/_flight.c", "forward_motor = clip(forward, -limit, limit);", "forward_motor = forward;")],
+    ),
+    "N14": (
+        "the DVL's lever arm left in its velocity",
+        [
+            (
+                "envs/_flight.c",
+                "S(VELOCITY)[k] = S(R_DVL_VELOCITY)[k] - lever[k];",
+                "S(VELOCITY)[k] = S(R_DVL_VELOCITY)[k];",
+            )
+        ],
+    ),
+    "N15": (
+        "the estimator without gravity's tilt correction",
+        [
+            (
+                "envs/_flight.c",
+                "correction[k] = correction[k] + k_tilt * e[k];",
+                "correction[k] = correction[k];",
+            )
+        ],
+    ),
+    "N16": (
+        "the heading captured without the 250 ms brake",
+        [
+            (
+                "envs/_flight.c",
+                "*S(FC_TIME) < *S(LAST_YAW_INPUT) + HEADING_CAPTURE_DELAY_S",
+                "*S(FC_TIME) < *S(LAST_YAW_INPUT)",
+            )
+        ],
+    ),
+    "N17": (
+        "half the contact time counted",
+        [
+            (
+                "envs/_flight.c",
+                "if (touching) *S(CONTACT_S) += seconds;",
+                "if (touching) *S(CONTACT_S) += 0.5 * seconds;",
+            )
+        ],
+    ),
+    "N18": (
+        "AC_PID's integrator ignoring the limit flag",
+        [("envs/_flight.c", "if (!limit || shrinking) {", "if (1) {")],
     ),
 }
 
