@@ -132,6 +132,143 @@ STATE_ORDER = (
 _ZEROS = [0.0] * 64
 
 
+def _curve(curve) -> list[float]:
+    return [
+        curve.max_forward_n,
+        curve.max_reverse_n,
+        curve.deadband_us,
+        curve.forward_shape,
+        curve.reverse_shape,
+    ]
+
+
+def _pwm(pwm_range) -> list[float]:
+    return [pwm_range.pwm_min_us, pwm_range.pwm_max_us]
+
+
+def _noise_params(noise) -> dict[str, float]:
+    """The sensor noise levels (:class:`maptidal.envs.sensors.SensorNoise`)."""
+    return {
+        "ACCEL_SIGMA": noise.accel_sigma,
+        "ACCEL_WALK": noise.accel_bias_walk,
+        "GYRO_SIGMA": noise.gyro_sigma,
+        "GYRO_WALK": noise.gyro_bias_walk,
+        "DEPTH_SIGMA": noise.depth_sigma,
+        "DVL_SIGMA": noise.dvl_sigma,
+        "COMPASS_SIGMA_DEG": noise.compass_sigma_deg,
+    }
+
+
+def _mixer_params(mixer) -> dict[str, object]:
+    """ArduSub's frame factors and forward-vertical coupling (:mod:`maptidal.controllers.mixing`)."""
+    values: dict[str, object] = {
+        "MIX_6DOF": mixer.frame == "vectored_6dof",
+        "MIX_COUPLING": mixer.forward_vertical_coupling,
+        "MIX_FACTORS": FRAMES[mixer.frame],
+    }
+    if mixer.frame == "vectored":
+        values["MIX_REAR"] = _FORWARD_COUPLING_DIRECTION
+    return values
+
+
+def _thrust_params(plant, gains, believed, mode_params) -> dict[str, object]:
+    """The plant's thrust curve, gains and power law (what the physics pushes with), and the believed
+    curve the flight modes linearise against."""
+    power = plant.thruster.power
+    return {
+        "PLANT_CURVE": _curve(plant.thruster.curve),
+        "PLANT_PWM": _pwm(plant.thruster.pwm_range),
+        "GAINS": gains,
+        "POWER": [
+            power.forward_coefficient,
+            power.forward_exponent,
+            power.reverse_coefficient,
+            power.reverse_exponent,
+        ],
+        "LINEARISE": mode_params.linearise_thrust,
+        "LIN_CURVE": _curve(believed.thruster.curve),
+        "LIN_PWM": _pwm(believed.thruster.pwm_range),
+    }
+
+
+def _body_force_params(model) -> dict[str, object]:
+    """What the estimator takes the thrusters' commanded force from without a DVL fix
+    (:meth:`maptidal.controllers.pose.VehicleModel.body_force`)."""
+    n = len(model.thruster_positions)
+    matrix = np.zeros((3, MAX_THRUSTERS))
+    matrix[:, :n] = _force_matrix(model)
+    linear = model.thrust_curve is None
+    return {
+        "BF_LINEAR": linear,
+        "BF_CURVE": [model.max_forward_n, model.max_reverse_n, 0.0, 0.0, 0.0]
+        if linear
+        else _curve(model.thrust_curve),
+        "BF_PWM": _pwm(model.pwm_range),
+        "BF_MATRIX": matrix,
+    }
+
+
+def _estimator_params(params) -> dict[str, object]:
+    """:class:`maptidal.controllers.estimation.EstimatorParams` and its motion model."""
+    values: dict[str, object] = {
+        "SURFACE_Z": params.surface_z_m,
+        "DEPTH_SENSOR_POS": params.depth_sensor_position,
+        "DVL_POS": params.dvl_position,
+        "TILT_K": params.tilt_correction_rad_s,
+        "HEADING_K": params.heading_correction_rad_s,
+    }
+    model = params.motion_model
+    if model is not None:
+        values.update(
+            HAS_MOTION_MODEL=True,
+            MM_INERTIA=model.inertia,
+            MM_LINEAR=model.linear_damping,
+            MM_QUADRATIC=model.quadratic_damping,
+            MM_BUOYANCY=model.net_buoyancy_n,
+        )
+    return values
+
+
+def _flight_params(controller) -> dict[str, object]:
+    """A flight controller's mode, stick scaling, rate-loop gains and position-control gains."""
+    m = controller.params
+    g = controller.depth_control.gains
+    return {
+        "MODE": FLIGHT_MODES.index(controller.mode),
+        "MAX_LEAN_DEG": m.max_lean_deg,
+        "MAX_YAW_RATE_DEG_S": m.max_yaw_rate_deg_s,
+        "RP_DZ": m.roll_pitch_dead_zone,
+        "YAW_DZ": m.yaw_dead_zone,
+        "THR_DZ": m.throttle_dead_zone,
+        "TRANS_DZ": m.translation_dead_zone,
+        "RATE_RP": _acpid_gains(controller.rate[0].gains),
+        "RATE_YAW": _acpid_gains(controller.rate[2].gains),
+        "POS_GAINS": [
+            g.pos_z_p,
+            g.vel_z_p,
+            g.acc_z_p,
+            g.acc_z_i,
+            g.acc_z_imax,
+            g.pilot_speed_up_m_s,
+            g.pilot_speed_down_m_s,
+            g.pilot_accel_z_m_s2,
+            g.surface_depth_m,
+            g.pos_xy_p,
+            g.vel_xy_p,
+            g.vel_xy_i,
+            g.vel_xy_d,
+            g.vel_xy_imax_cm_s2,
+            g.angle_max_deg,
+            g.max_speed_m_s,
+        ],
+        "FC_SURFACE_Z": controller.depth_control.surface_z_m,
+    }
+
+
+def _acpid_gains(g) -> list[float]:
+    return [g.kp, g.ki, g.kd, g.imax, g.target_filter_hz, g.error_filter_hz, g.derivative_filter_hz]
+
+
 class _Block:
     """One flat block of doubles with named fields (a view of the C layout)."""
 
@@ -139,11 +276,8 @@ class _Block:
         self.fields = layout(which)
         self.size = self.fields["__size__"][0]
 
-    def slot(self, name: str) -> slice:
-        offset, size = self.fields[name]
-        return slice(offset, offset + size)
-
     def index(self, name: str) -> int:
+        """Where field ``name`` starts in the block."""
         return self.fields[name][0]
 
 
@@ -207,147 +341,60 @@ class NativeFlight:
         )
 
     def _pack_params(self, k: int, robot: str) -> None:
+        """Write ``robot``'s parameters into its block, when any object they come from has changed."""
         sim = self.sim
         key = self._key(robot)
         old = self._params_key[k]
         if old is not None and all(a is b for a, b in zip(old, key, strict=True)):
             return
-        b = self.params_block
-        p = self.params[k]
-        p[:] = 0.0
-        spec = sim._specs[robot]
-        n = spec.vehicle.n_thrusters
         controller, estimator, plant, gains, noise, mixer, mode_params = key
+        values = {
+            **self._robot_params(robot),
+            **_noise_params(noise),
+            **_mixer_params(mixer),
+            **_thrust_params(plant, gains, sim._specs[robot].vehicle, mode_params),
+            **_body_force_params(sim._vehicle_models[robot]),
+        }
+        values["HAS_AUTOPILOT"] = controller is not None
+        values["HAS_ESTIMATOR"] = estimator is not None
+        if estimator is not None:
+            values.update(_estimator_params(estimator.params))
+        if controller is not None:
+            values.update(_flight_params(controller))
+        row = self.params[k]
+        row[:] = 0.0
+        for name, value in values.items():
+            flat = np.ravel(np.asarray(value, float))
+            offset = self.params_block.index(name)
+            row[offset : offset + len(flat)] = flat
+        self._params_key[k] = key
+
+    def _robot_params(self, robot: str) -> dict[str, object]:
+        """Where ``robot`` lives in the model and which sensors it reads, and where."""
+        sim = self.sim
         slot = sim._slots[robot]
         sensors = sim._sensors[robot]
-
-        def put(name: str, values) -> None:
-            values = np.atleast_1d(np.asarray(values, float)).ravel()
-            offset = b.index(name)
-            p[offset : offset + len(values)] = values
-
-        put("HAS_AUTOPILOT", controller is not None)
-        put("HAS_ESTIMATOR", estimator is not None)
-        put("MODE", FLIGHT_MODES.index(controller.mode) if controller is not None else 0)
-        put("N_THR", n)
-        put("CTRL_ADR", sim._ctrl_adr[robot])
-        put("ACT_ADR", slot.act_adr)
-        put("QPOS_ADR", sim._position_adr[robot])
-        put("BODY_ID", slot.body_id)
-        for flag, sensor in (
-            ("EN_IMU", "imu"),
-            ("EN_DEPTH", "depth"),
-            ("EN_DVL", "dvl"),
-            ("EN_COMPASS", "compass"),
-        ):
-            put(flag, sensor in sensors.enabled)
         starts = {name: s.start for name, s in sensors._slices.items()}
-        put("ADR_ACCEL", starts["accelerometer"])
-        put("ADR_GYRO", starts["gyro"])
-        put("ADR_MAG", starts["magnetometer"])
-        put("ADR_VELOCIMETER", starts["velocimeter"])
-        put("ADR_DEPTH_POS", starts["depth_pos"])
-        put("ADR_BEAM", [starts[f"beam{j}"] for j in range(4)])
-        put("ACCEL_SIGMA", noise.accel_sigma)
-        put("ACCEL_WALK", noise.accel_bias_walk)
-        put("GYRO_SIGMA", noise.gyro_sigma)
-        put("GYRO_WALK", noise.gyro_bias_walk)
-        put("DEPTH_SIGMA", noise.depth_sigma)
-        put("DVL_SIGMA", noise.dvl_sigma)
-        put("COMPASS_SIGMA_DEG", noise.compass_sigma_deg)
-        put("DVL_LOW", sensors.dvl_range[0])
-        put("DVL_HIGH", sensors.dvl_range[1])
-        put("WATER_DEPTH", sensors.water_depth)
-        put("MIX_6DOF", mixer.frame == "vectored_6dof")
-        put("MIX_COUPLING", mixer.forward_vertical_coupling)
-        put("MIX_FACTORS", FRAMES[mixer.frame])
-        if mixer.frame == "vectored":
-            put("MIX_REAR", _FORWARD_COUPLING_DIRECTION)
-
-        def curve(c) -> list[float]:
-            return [c.max_forward_n, c.max_reverse_n, c.deadband_us, c.forward_shape, c.reverse_shape]
-
-        def pwm(r) -> list[float]:
-            return [r.pwm_min_us, r.pwm_max_us]
-
-        put("PLANT_CURVE", curve(plant.thruster.curve))
-        put("PLANT_PWM", pwm(plant.thruster.pwm_range))
-        put("GAINS", gains)
-        power = plant.thruster.power
-        put(
-            "POWER",
-            [
-                power.forward_coefficient,
-                power.forward_exponent,
-                power.reverse_coefficient,
-                power.reverse_exponent,
-            ],
-        )
-        put("LINEARISE", mode_params.linearise_thrust)
-        put("LIN_CURVE", curve(spec.vehicle.thruster.curve))
-        put("LIN_PWM", pwm(spec.vehicle.thruster.pwm_range))
-        if estimator is not None:
-            e = estimator.params
-            put("SURFACE_Z", e.surface_z_m)
-            put("DEPTH_SENSOR_POS", e.depth_sensor_position)
-            put("DVL_POS", e.dvl_position)
-            put("TILT_K", e.tilt_correction_rad_s)
-            put("HEADING_K", e.heading_correction_rad_s)
-            if e.motion_model is not None:
-                m = e.motion_model
-                put("HAS_MOTION_MODEL", 1.0)
-                put("MM_INERTIA", m.inertia)
-                put("MM_LINEAR", m.linear_damping)
-                put("MM_QUADRATIC", m.quadratic_damping)
-                put("MM_BUOYANCY", m.net_buoyancy_n)
-        model = sim._vehicle_models[robot]
-        put("BF_LINEAR", model.thrust_curve is None)
-        if model.thrust_curve is None:
-            put("BF_CURVE", [model.max_forward_n, model.max_reverse_n, 0.0, 0.0, 0.0])
-        else:
-            put("BF_CURVE", curve(model.thrust_curve))
-        put("BF_PWM", pwm(model.pwm_range))
-        matrix = np.zeros((3, MAX_THRUSTERS))
-        matrix[:, :n] = _force_matrix(model)
-        put("BF_MATRIX", matrix)
-        if controller is not None:
-            m = controller.params
-            put("MAX_LEAN_DEG", m.max_lean_deg)
-            put("MAX_YAW_RATE_DEG_S", m.max_yaw_rate_deg_s)
-            put("RP_DZ", m.roll_pitch_dead_zone)
-            put("YAW_DZ", m.yaw_dead_zone)
-            put("THR_DZ", m.throttle_dead_zone)
-            put("TRANS_DZ", m.translation_dead_zone)
-            for name, pid in (("RATE_RP", controller.rate[0]), ("RATE_YAW", controller.rate[2])):
-                g = pid.gains
-                put(
-                    name,
-                    [g.kp, g.ki, g.kd, g.imax, g.target_filter_hz, g.error_filter_hz, g.derivative_filter_hz],
-                )
-            g = controller.depth_control.gains
-            put(
-                "POS_GAINS",
-                [
-                    g.pos_z_p,
-                    g.vel_z_p,
-                    g.acc_z_p,
-                    g.acc_z_i,
-                    g.acc_z_imax,
-                    g.pilot_speed_up_m_s,
-                    g.pilot_speed_down_m_s,
-                    g.pilot_accel_z_m_s2,
-                    g.surface_depth_m,
-                    g.pos_xy_p,
-                    g.vel_xy_p,
-                    g.vel_xy_i,
-                    g.vel_xy_d,
-                    g.vel_xy_imax_cm_s2,
-                    g.angle_max_deg,
-                    g.max_speed_m_s,
-                ],
-            )
-            put("FC_SURFACE_Z", controller.depth_control.surface_z_m)
-        self._params_key[k] = key
+        return {
+            "N_THR": sim._specs[robot].vehicle.n_thrusters,
+            "CTRL_ADR": sim._ctrl_adr[robot],
+            "ACT_ADR": slot.act_adr,
+            "QPOS_ADR": sim._position_adr[robot],
+            "BODY_ID": slot.body_id,
+            "EN_IMU": "imu" in sensors.enabled,
+            "EN_DEPTH": "depth" in sensors.enabled,
+            "EN_DVL": "dvl" in sensors.enabled,
+            "EN_COMPASS": "compass" in sensors.enabled,
+            "ADR_ACCEL": starts["accelerometer"],
+            "ADR_GYRO": starts["gyro"],
+            "ADR_MAG": starts["magnetometer"],
+            "ADR_VELOCIMETER": starts["velocimeter"],
+            "ADR_DEPTH_POS": starts["depth_pos"],
+            "ADR_BEAM": [starts[f"beam{j}"] for j in range(4)],
+            "DVL_LOW": sensors.dvl_range[0],
+            "DVL_HIGH": sensors.dvl_range[1],
+            "WATER_DEPTH": sensors.water_depth,
+        }
 
     def supported(self) -> bool:
         """Whether every robot's configuration is one the C side flies as the Python does: at most

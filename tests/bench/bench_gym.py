@@ -11,13 +11,13 @@ import argparse
 import os
 import time
 
+os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is imported: it picks its GL backend then
+
 import gymnasium
 import mujoco
 import numpy as np
 
 import maptidal.envs  # noqa: F401
-
-os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 def env_rate(env_id: str, steps: int, **options) -> float:

@@ -219,7 +219,7 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             ),
             (
                 "controllers/flight_modes.py",
-                "            self._heading = estimate.yaw  # brake to zero rate",
+                "            self._heading = estimate.yaw  # brake to zero rate, still following the heading",
                 "            self._heading = self._heading if self._heading is not None else estimate.yaw",
             ),
         ],
