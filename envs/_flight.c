@@ -705,3 +705,23 @@ int maptidal_flight_periods(const mjModel* m, mjData* d, const double* params, d
   }
   return n_periods;
 }
+
+/* A batch of simulations with one robot each (the batched vector environment): maptidal_flight_periods
+ * on each active one, with its own blocks, noise (draws_per_sim each), currents (periods x 3 where
+ * blowing, else none) and per-period outputs (periods x 2). ran: the periods each flew. */
+void maptidal_flight_batch(int n_sims, const mjModel* const* models, mjData* const* datas, double* params,
+                           double* state, const int* active, int n_periods, int substeps, double period_s,
+                           double seconds, double path_step, const double* noise, int draws_per_sim,
+                           const double* currents, const int* blowing, int current_slot,
+                           double* per_period, int* ran, double* wall) {
+  make_layout();
+  int pn = param_offsets[N_PARAM_FIELDS], sn = state_offsets[N_STATE_FIELDS], first = 0;
+  for (int i = 0; i < n_sims; i++) {
+    if (!active[i]) continue;
+    ran[i] = maptidal_flight_periods(models[i], datas[i], params + i * pn, state + i * sn, 1, &first, 1,
+                                     n_periods, substeps, period_s, seconds, path_step,
+                                     noise + i * draws_per_sim,
+                                     blowing[i] ? currents + 3 * n_periods * i : NULL, &current_slot,
+                                     per_period + 2 * n_periods * i, wall);
+  }
+}

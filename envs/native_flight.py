@@ -79,6 +79,28 @@ def library() -> ctypes.CDLL | None:
                     pointer,  # per period out, double
                     pointer,  # wall time in mj_step (s), double
                 ]
+                lib.maptidal_flight_batch.restype = None
+                lib.maptidal_flight_batch.argtypes = [
+                    ctypes.c_int,  # simulations
+                    pointer,  # their mjModel*, an array
+                    pointer,  # their mjData*, an array
+                    pointer,  # params, a double block per simulation
+                    pointer,  # state, a double block per simulation
+                    pointer,  # active, int per simulation
+                    ctypes.c_int,  # periods
+                    ctypes.c_int,  # substeps
+                    ctypes.c_double,  # period (s)
+                    ctypes.c_double,  # physics time per period (s)
+                    ctypes.c_double,  # path step (m)
+                    pointer,  # noise, double
+                    ctypes.c_int,  # draws per simulation
+                    pointer,  # currents, double (simulations x periods x 3)
+                    pointer,  # blowing, int per simulation
+                    ctypes.c_int,  # where a robot's current lives in userdata
+                    pointer,  # per period out, double (simulations x periods x 2)
+                    pointer,  # ran, int per simulation
+                    pointer,  # wall time in mj_step (s), double
+                ]
                 _library = lib
             except OSError as error:
                 log.debug("cannot load the flight library %s: %s", path, error)
@@ -510,8 +532,9 @@ class NativeFlight:
             e = estimator.state
             j = o["QUAT"]
             estimator.quaternion = row[j : j + 4].copy()
-            e.position = row[j + 4 : j + 7].copy()
-            e.rpy = row[j + 7 : j + 10].copy()
+            # in place where the Python updates in place, so a reference someone holds moves alike
+            e.position[:] = row[j + 4 : j + 7]
+            e.rpy[:] = row[j + 7 : j + 10]
             e.velocity_body = row[j + 10 : j + 13].copy()
             e.angular_velocity_body = row[j + 13 : j + 16].copy()
             e.time_s = v[j + 16]
@@ -520,8 +543,8 @@ class NativeFlight:
             sim._readings[robot] = self._readings(robot, v)
         sensors = sim._sensors[robot]
         j = o["ACCEL_BIAS"]
-        sensors.accel_bias = row[j : j + 3].copy()
-        sensors.gyro_bias = row[j + 3 : j + 6].copy()
+        sensors.accel_bias[:] = row[j : j + 3]
+        sensors.gyro_bias[:] = row[j + 3 : j + 6]
         if v[o["OUTPUTS_SET"]]:
             j = o["OUTPUTS"]
             sim._thruster_outputs[robot] = row[j : j + sim._specs[robot].vehicle.n_thrusters].copy()

@@ -30,6 +30,16 @@ from maptidal.envs.sensors import heading_from_field
 RNG = np.random.default_rng(2026)
 
 
+@pytest.fixture(params=["native", "python"])
+def flight_backend(request, monkeypatch) -> str:
+    """Both ways a batch flies: the robots' blocks in one call of the compiled flight stack, and the
+    numpy twins of the flight stack (where the compiled one is not there), each against a
+    ``SyncVectorEnv`` flying the same stack."""
+    if request.param == "python":
+        monkeypatch.setenv("MAPTIDAL_FLIGHT", "python")
+    return request.param
+
+
 # ----- the twins, against their one-robot references ---------------------------------------------
 def test_sqrt_controllers_and_dead_zones_are_the_scalar_functions_row_by_row():
     errors = np.concatenate([RNG.normal(0, 0.05, 50), RNG.normal(0, 2.0, 50), [0.0, 1e-9, -1e-9]])
@@ -157,7 +167,7 @@ CASES = {
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_the_batch_gives_what_one_robot_environments_give_across_resets(case):
+def test_the_batch_gives_what_one_robot_environments_give_across_resets(case, flight_backend):
     env_id, options = CASES[case]
     n, length = 2, 12
     batched = gymnasium.make_vec(env_id, num_envs=n, max_episode_steps=length, flat_obs=True, **options)
@@ -166,6 +176,7 @@ def test_the_batch_gives_what_one_robot_environments_give_across_resets(case):
     )
     try:
         assert isinstance(batched, BatchedPoseEnv)
+        assert batched.native == (flight_backend == "native")
         assert batched.observation_space == sync.observation_space
         assert batched.action_space == sync.action_space
         got, _ = batched.reset(seed=11)
@@ -192,7 +203,7 @@ def test_the_batch_gives_what_one_robot_environments_give_across_resets(case):
         sync.close()
 
 
-def test_a_partial_reset_resets_only_the_masked_robots():
+def test_a_partial_reset_resets_only_the_masked_robots(flight_backend):
     n = 3
     batched = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, flat_obs=True)
     sync = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, vectorization_mode="sync", flat_obs=True)
@@ -269,7 +280,7 @@ def test_bad_actions_and_arguments_raise_before_anything_moves():
         BatchedPoseEnv("tank_inspection", 1)
 
 
-def test_contacts_cost_the_same_in_the_batch():
+def test_contacts_cost_the_same_in_the_batch(flight_backend):
     # dived into the floor from just above it: the contact's cost is the one-robot environment's, also
     # in steps where the other robot waits on its autoreset (row 1 is reset again at step 4, so the rows
     # end their 12-step episodes 4 steps apart, and at step 13 row 1 is on the floor while row 0 resets)

@@ -4,12 +4,20 @@
 Each sub-environment is a whole :class:`~maptidal.envs.gym.go_to_pose.GoToPoseEnv` (or
 StationKeeping): its own MuJoCo model and data, its own random streams. Resets go through it, so the
 start states, targets, currents and randomisation are the one-robot environment's own. Stepping does
-not: the flight stack of all N robots runs once per control period on arrays
-(:mod:`maptidal.controllers.batched`: STABILIZE or MANUAL, the mixer, the thrust curve, the
-dead-reckoning estimator), the sensors are read and given their noise from each sub-environment's own
-generator in the one-robot order, and only MuJoCo's ``mj_step`` runs robot by robot. So a batch of N
-gives the observations and rewards N one-robot environments give, to rounding (``tests/test_batched.py``
-holds it to 1e-6 over episodes, resets included), at a fraction of the Python.
+not go through it, in one of two ways:
+
+- **compiled** (where every robot's simulation has the compiled flight stack,
+  :mod:`maptidal.envs.native_flight`): the batch keeps each robot's parameter and state blocks, packed
+  from its simulation at each reset, and flies every robot's control periods in one call of the C
+  (``maptidal_flight_batch``), with each robot's noise from its own generator; observations are read
+  from the blocks. A step then costs about its physics.
+- **numpy** (otherwise): the flight stack of all N robots runs once per control period on arrays
+  (:mod:`maptidal.controllers.batched`: STABILIZE or MANUAL, the mixer, the thrust curve, the
+  dead-reckoning estimator), the sensors are read and given their noise from each sub-environment's
+  own generator in the one-robot order, and only MuJoCo's ``mj_step`` runs robot by robot.
+
+Either way a batch of N gives the observations and rewards N one-robot environments give, to rounding
+(``tests/test_batched.py`` holds both ways to 1e-6 over episodes, resets included).
 
 What it does not do (``make_vec`` then falls back on a ``SyncVectorEnv`` of one-robot environments, with
 a warning that says why): image observations, ``render_mode``, the ALT_HOLD and POSHOLD flight modes,
@@ -42,9 +50,10 @@ from maptidal.controllers.batched import (
     mix_batch,
 )
 from maptidal.controllers.thrusters import linearise_thrusters
+from maptidal.envs import hydrodynamics, native_flight
 from maptidal.envs.gym.core import CONTACT_COST_PER_S, MAX_EPISODE_S, POSITION_TOLERANCE_M, YAW_TOLERANCE_RAD
 from maptidal.envs.sensors import SENSORS
-from maptidal.envs.simulation import _BAD_STATE_WARNINGS, SimulationError
+from maptidal.envs.simulation import _BAD_STATE_WARNINGS, PATH_STEP_M, SimulationError
 
 TASKS = ("go_to_pose", "station_keeping")
 NORMALS_PER_PERIOD = 17  # a robot's sensors' standard normals per control period (_draw_noise)
@@ -197,6 +206,21 @@ class BatchedPoseEnv(VectorEnv):
         self._ctrl_views, self._sensordata_views, self._up_views = [None] * n, [None] * n, [None] * n
         for row in range(n):
             self._refresh_views(row)
+        # the compiled flight stack (maptidal.envs.native_flight), where every robot's simulation has it:
+        # the batch keeps each robot's parameter and state blocks itself and flies them all in one call
+        self.native = all(sim._native is not None for sim in self.sims)
+        if self.native:
+            params, state = native_flight.layout(0), native_flight.layout(1)
+            self._offsets = {name: offset for name, (offset, _) in state.items()}
+            self._params = np.zeros((n, params["__size__"][0]))
+            self._state = np.zeros((n, state["__size__"][0]))
+            self._noise = np.zeros((n, self.periods_per_step * NORMALS_PER_PERIOD))
+            self._currents = np.zeros((n, self.periods_per_step, 3))
+            self._per_period = np.zeros((n, self.periods_per_step, 2))
+            self._ran = np.zeros(n, np.intc)
+            self._wall = np.zeros(1)
+            self._model_addresses = np.array([sim.model._address for sim in self.sims], np.uintp)
+            self._data_addresses = np.array([sim.data._address for sim in self.sims], np.uintp)
 
     @staticmethod
     def _check_sensors(env) -> None:
@@ -267,6 +291,15 @@ class BatchedPoseEnv(VectorEnv):
             + [n.dvl_sigma] * 3
             + [n.compass_sigma_deg]
         )
+        if self.native:  # the robot's blocks, packed from its simulation's objects as one robot's are
+            flight = sim._native
+            flight._pack_params(0, robot)
+            flight._pack_state(0, robot)
+            self._params[row], self._state[row] = flight.params[0], flight.state[0]
+            o, state = self._offsets, self._state[row]  # and the readings the observation shows
+            state[o["R_ACCEL"] : o["R_ACCEL"] + 3] = readings["imu"]["accel"]
+            state[o["R_GYRO"] : o["R_GYRO"] + 3] = readings["imu"]["gyro"]
+            state[o["R_DEPTH"]] = readings["depth"]["depth_m"]
 
     def _refresh_views(self, row: int) -> None:
         sim = self.sims[row]
@@ -299,16 +332,19 @@ class BatchedPoseEnv(VectorEnv):
         rows = np.flatnonzero(active)
         energy, touching = np.zeros(self.num_envs), np.zeros(self.num_envs)
         pilot = a if self.thrusters_action else self.pilot_gain.apply(a)
-        noise = self._draw_noise(rows)
-        blowing = [self.envs[row] for row in rows if self.envs[row].episode_turbulence_m_s > 0]
-        for period in range(self.periods_per_step):
-            for env in blowing:
-                env._before_substep()
-            self._drive(pilot)
-            energy += (self.outputs * self.outputs).sum(axis=1) / self.n_thrusters
-            touching += self._advance(rows, noise[period])
-            self._estimate(noise[period])
-        self._check_physics(rows)
+        if self._native_ready():
+            energy, touching = self._fly_native(pilot, rows)
+        else:
+            noise = self._draw_noise(rows)
+            blowing = [self.envs[row] for row in rows if self.envs[row].episode_turbulence_m_s > 0]
+            for period in range(self.periods_per_step):
+                for env in blowing:
+                    env._before_substep()
+                self._drive(pilot)
+                energy += (self.outputs * self.outputs).sum(axis=1) / self.n_thrusters
+                touching += self._advance(rows, noise[period])
+                self._estimate(noise[period])
+            self._check_physics(rows)
         self.steps += active
         rewards, infos = self._rewards(energy / self.periods_per_step, touching * self.period_s)
         terminated = np.zeros(self.num_envs, bool)
@@ -330,6 +366,74 @@ class BatchedPoseEnv(VectorEnv):
             observations = self._observation()
         self._autoreset = terminated | truncated
         return observations, rewards, terminated, truncated, infos
+
+    def _native_ready(self) -> bool:
+        # the C loop calls mj_step, so the passive-force callback must be the C one too
+        return self.native and self.sims[0]._native_ready()
+
+    def _fly_native(self, pilot: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The step's control periods for ``rows`` in one call of the compiled flight stack; each row's
+        summed mean squared thruster command and periods in contact. STABILIZE runs in the C on each
+        robot's pilot command; MANUAL and the thruster action send their commands to the thrusters here,
+        held for the step, as a one-robot simulation does."""
+        o, state, periods = self._offsets, self._state, self.periods_per_step
+        if self.stabilized:
+            state[rows, o["PILOT"] : o["PILOT"] + 6] = pilot[rows]
+        else:
+            self._drive(pilot)
+            state[rows, o["OUTPUTS"] : o["OUTPUTS"] + self.n_thrusters] = self.outputs[rows]
+            state[rows, o["OUTPUTS_SET"]] = 1.0
+        active = np.zeros(self.num_envs, np.intc)
+        active[rows] = 1
+        blowing = np.zeros(self.num_envs, np.intc)
+        for row in rows.tolist():
+            self.sims[row].rng.standard_normal(out=self._noise[row])  # the one-robot order (_draw_noise)
+            currents = self.envs[row]._substep_currents()
+            if currents is not None:
+                self._currents[row], blowing[row] = currents, 1
+        first = self.sims[0]
+        period_s = first.scenario.substeps * first.scenario.timestep_s
+        self._ran[:] = periods
+        self._wall[0] = 0.0
+        native_flight.library().maptidal_flight_batch(
+            self.num_envs,
+            self._model_addresses.ctypes.data,
+            self._data_addresses.ctypes.data,
+            self._params.ctypes.data,
+            state.ctypes.data,
+            active.ctypes.data,
+            periods,
+            self.substeps_per_period,
+            period_s,
+            period_s,
+            PATH_STEP_M,
+            self._noise.ctypes.data,
+            self._noise.shape[1],
+            self._currents.ctypes.data,
+            blowing.ctypes.data,
+            hydrodynamics.HEADER + hydrodynamics.SLOT_CURRENT,
+            self._per_period.ctypes.data,
+            self._ran.ctypes.data,
+            self._wall.ctypes.data,
+        )
+        failed = np.flatnonzero(self._ran < periods)
+        if len(failed):
+            raise SimulationError(
+                f"sub-environment {int(failed[0])}: the physics state became NaN or diverged; reset it"
+            )
+        e = self.estimator
+        e.position, e.rpy = state[:, o["POSITION"] : o["POSITION"] + 3], state[:, o["RPY"] : o["RPY"] + 3]
+        e.velocity_body = state[:, o["VELOCITY"] : o["VELOCITY"] + 3]
+        e.angular_velocity_body = state[:, o["RATES"] : o["RATES"] + 3]
+        self.readings = {
+            "accel": state[:, o["R_ACCEL"] : o["R_ACCEL"] + 3],
+            "gyro": state[:, o["R_GYRO"] : o["R_GYRO"] + 3],
+            "depth_m": state[:, o["R_DEPTH"]],
+        }
+        self.outputs = state[:, o["OUTPUTS"] : o["OUTPUTS"] + self.n_thrusters]
+        per_period = self._per_period
+        per_period[active == 0] = 0.0  # a row waiting on its reset flew nothing
+        return per_period[:, :, 0].sum(axis=1), (per_period[:, :, 1] > 0).sum(axis=1).astype(float)
 
     def _drive(self, pilot: np.ndarray) -> None:
         """One control period's thruster commands, into each robot's actuators."""

@@ -7,7 +7,8 @@ process so that a busy moment on a shared machine hits every side alike (median 
     python tests/bench/bench_batched.py [--envs 16] [--steps 400] [--env-id MapTidal/GoToPose-v1]
 
 Goals (issue [rl], part 6): batched >= 3x SyncVectorEnv at N = 16; the batched env.step <= 1.5x bare
-mj_step for the same physics time.
+mj_step for the same physics time. Where the compiled flight stack runs, the batch flies every robot in
+one call of it and SyncVectorEnv's robots fly it one by one.
 """
 
 from __future__ import annotations
@@ -28,8 +29,10 @@ import maptidal.envs  # noqa: F401  (registers MapTidal/)
 def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float]:
     """Robot steps per second of each side, and the ratios. The bare side is MuJoCo alone doing the
     batch's very physics: a second batch reset with the same seed, whose robots get, period by period,
-    the controls the batch gave its own (recorded as it ran) and are stepped by ``mj_step`` and nothing
-    else, so both sides integrate the same states and contacts."""
+    the controls the batch's robots get (recorded beforehand by one-robot environments with the rows'
+    seeds, flown one control period at a time: the compiled flight stack flies a robot alike alone and
+    in a batch, and one period at a time as five) and are stepped by ``mj_step`` and nothing else, so
+    both sides integrate the same states and contacts."""
     # no episode ends within the measurement: a batch row that reset would leave its bare twin, which
     # is only stepped, on another trajectory (every side gets the same limit)
     limit = {"max_episode_steps": 10 * (steps + 10)}
@@ -40,16 +43,10 @@ def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float
         vec.reset(seed=0)
     sims = [env.sim for env in twin.envs]
     substeps = twin.substeps_per_period
-    recorded: list[list[np.ndarray]] = []
-    drive = batched._drive
-
-    def recording_drive(pilot):
-        drive(pilot)
-        recorded.append([sim.data.ctrl.copy() for sim in batched.sims])
-
-    batched._drive = recording_drive
     rng = np.random.default_rng(0)
     actions = rng.uniform(-0.3, 0.3, (n, *batched.single_action_space.shape)).astype(np.float32)
+    total_steps = 3 + max(1, steps // block) * block
+    recorded = record_controls(env_id, n, actions, total_steps, limit)
 
     def run_batched() -> None:
         batched.step(actions)
@@ -88,6 +85,40 @@ def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float
         "sync step / bare mj_step (time)": rate["bare mj_step"] / rate["sync"],
         "bare side flew the batch's trajectory (1 = yes)": float(same),
     }
+
+
+def record_controls(
+    env_id: str, n: int, actions: np.ndarray, steps: int, limit: dict
+) -> list[list[np.ndarray]]:
+    """Each control period's controls of each of ``n`` one-robot environments (seeds 0 to n - 1, as a
+    batch reset with seed 0 gives its rows), holding ``actions`` for ``steps`` steps."""
+    per_robot = []
+    for k in range(n):
+        env = gymnasium.make(env_id, **limit)
+        env.reset(seed=k)
+        controls = recording(env.unwrapped.sim)
+        for _ in range(steps):
+            env.step(actions[k])
+        per_robot.append(controls)
+        env.close()
+    return [list(period) for period in zip(*per_robot, strict=True)]
+
+
+def recording(sim) -> list[np.ndarray]:
+    """Make ``sim`` fly one control period at a time and record its controls after each; the record."""
+    whole = sim.step_periods
+    controls: list[np.ndarray] = []
+
+    def one_period_at_a_time(commands, n_periods=1, mode="pilot", currents=None):
+        parts = []
+        for period in range(n_periods):
+            current = None if currents is None else currents[period : period + 1]
+            parts.append(whole(commands, 1, mode, current))
+            controls.append(sim.data.ctrl.copy())
+        return np.concatenate(parts)
+
+    sim.step_periods = one_period_at_a_time
+    return controls
 
 
 def main() -> None:

@@ -617,6 +617,20 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         "an autoresetting row keeps its last step's info",
         [("envs/gym/batched.py", "infos = _only_rows(infos, active)", "pass")],
     ),
+    "B10": (
+        "a row waiting on its reset keeps its last step's contacts (compiled batch)",
+        [("envs/gym/batched.py", "        per_period[active == 0] = 0.0", "        pass")],
+    ),
+    "B11": (
+        "a reset row's readings left as the packed state has them (zeros; compiled batch)",
+        [
+            (
+                "envs/gym/batched.py",
+                '            state[o["R_ACCEL"] : o["R_ACCEL"] + 3] = readings["imu"]["accel"]',
+                "            pass",
+            )
+        ],
+    ),
     "N1": (
         "the motion model without its Coriolis term",
         [("envs/_flight.c", "force[k] = force[k] - turn[k];", "force[k] = force[k];")],
