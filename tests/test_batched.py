@@ -247,8 +247,37 @@ def test_make_vec_batches_the_pose_tasks_and_falls_back_where_it_cannot():
             fallback.step(fallback.action_space.sample())
     finally:
         fallback.close()
-    with pytest.warns(UserWarning, match="alt_hold"):
-        gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=1, flight_mode="alt_hold").close()
+    with pytest.warns(UserWarning, match="vectored_6dof"):
+        gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=1, frame="standard").close()
+
+
+@pytest.mark.parametrize("mode", ["alt_hold", "poshold"])
+def test_the_compiled_batch_flies_the_hold_modes_and_the_numpy_one_leaves_them_to_sync(mode, monkeypatch):
+    """ALT_HOLD and POSHOLD have no numpy twin: the batch flies them only on the compiled stack, as the
+    one-robot environments do, and without it make_vec falls back on a SyncVectorEnv and says why."""
+    n, length = 2, 8
+    options = {"flight_mode": mode, "max_episode_steps": length, "flat_obs": True}
+    batched = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, **options)
+    sync = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=n, vectorization_mode="sync", **options)
+    try:
+        assert isinstance(batched, BatchedPoseEnv) and batched.native
+        np.testing.assert_array_equal(batched.reset(seed=3)[0], sync.reset(seed=3)[0])
+        rng = np.random.default_rng(8)
+        for _ in range(length + 3):  # an episode end and the autoreset after it
+            actions = rng.uniform(-1.0, 1.0, batched.action_space.shape).astype(np.float32)
+            actions[:, :2] *= rng.integers(0, 2, (n, 1))  # POSHOLD: sticks centred half the time
+            got, got_reward, *_ = batched.step(actions)
+            want, want_reward, *_ = sync.step(actions)
+            np.testing.assert_allclose(got, want, atol=1e-6)
+            np.testing.assert_allclose(got_reward, want_reward, atol=1e-6)
+    finally:
+        batched.close()
+        sync.close()
+    monkeypatch.setenv("MAPTIDAL_FLIGHT", "python")
+    with pytest.warns(UserWarning, match=f"{mode!r} is batched only by the compiled flight stack"):
+        fallback = gymnasium.make_vec("MapTidal/GoToPose-v1", num_envs=1, flight_mode=mode)
+    assert isinstance(fallback, gymnasium.vector.SyncVectorEnv)
+    fallback.close()
 
 
 def test_bad_actions_and_arguments_raise_before_anything_moves():

@@ -20,11 +20,12 @@ Either way a batch of N gives the observations and rewards N one-robot environme
 (``tests/test_batched.py`` holds both ways to 1e-6 over episodes, resets included).
 
 What it does not do (``make_vec`` then falls back on a ``SyncVectorEnv`` of one-robot environments, with
-a warning that says why): image observations, ``render_mode``, the ALT_HOLD and POSHOLD flight modes,
-scenarios without every sensor (IMU, depth, DVL, compass), frames other than the Heavy's
-vectored_6dof. The sub-environments' own simulations are left behind by a batched step (their
-estimators, autopilots and odometry are not updated; their physics is), so ``get_state`` of a
-sub-environment is not offered here.
+a warning that says why): image observations, ``render_mode``, scenarios without every sensor (IMU,
+depth, DVL, compass), frames other than the Heavy's vectored_6dof, and the ALT_HOLD and POSHOLD flight
+modes where the compiled flight stack is not there (the numpy batch flies STABILIZE and MANUAL). The
+sub-environments' own simulations are left behind by a batched step (their estimators, autopilots and
+odometry are not updated; their physics is), so ``get_state`` of a sub-environment is not offered
+here.
 
 Autoreset: Gymnasium's ``NEXT_STEP`` mode, as ``SyncVectorEnv``'s default: the step after an episode
 ended resets that sub-environment (its action is ignored) and returns its first observation with reward
@@ -34,6 +35,7 @@ ended resets that sub-environment (its action is ignored) and returns its first 
 from __future__ import annotations
 
 import math
+import os
 from typing import ClassVar
 
 import gymnasium
@@ -68,8 +70,14 @@ def unbatchable(options: dict) -> str | None:
     if (
         options.get("action", "pilot") == "pilot"
         and (options.get("flight_mode") or "stabilize") not in BATCHED_MODES
+        and not native_flight.native_available(
+            "numpy" if os.environ.get("MAPTIDAL_HYDRO") == "numpy" else "native"
+        )
     ):
-        return f"flight mode {options.get('flight_mode')!r} is not batched (only {', '.join(BATCHED_MODES)})"
+        return (
+            f"flight mode {options.get('flight_mode')!r} is batched only by the compiled flight stack, "
+            f"which is not there (the numpy batch flies {', '.join(BATCHED_MODES)})"
+        )
     if options.get("frame", "heavy") != "heavy":
         return "only the Heavy's vectored_6dof mixer is batched"
     if options.get("scenario") is not None:
@@ -136,9 +144,10 @@ class BatchedPoseEnv(VectorEnv):
 
     ``task`` ("go_to_pose" or "station_keeping"), ``num_envs``, ``max_episode_steps``, and the one-robot
     task's keyword arguments (``action``, ``flat_obs``, ``control_period_s``, ``pilot_gain``,
-    ``flight_mode`` "stabilize" or "manual", ``randomize``, StationKeeping's ``max_current_m_s`` and
-    ``turbulence_m_s``). Actions outside [-1, 1] are clipped; a NaN or infinite action, or one of the
-    wrong shape, raises ValueError before anything moves.
+    ``flight_mode`` "stabilize" or "manual", or "alt_hold" or "poshold" on the compiled stack,
+    ``randomize``, StationKeeping's ``max_current_m_s`` and ``turbulence_m_s``). Actions outside [-1, 1]
+    are clipped; a NaN or infinite action, or one of the wrong shape, raises ValueError before anything
+    moves.
     """
 
     metadata: ClassVar[dict] = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -165,10 +174,15 @@ class BatchedPoseEnv(VectorEnv):
         self.thrusters_action = first.options.action == "thrusters"
         mode = first.sim.flight_mode(self.robot) if not self.thrusters_action else "manual"
         # STABILIZE flies on an autopilot whose outputs are linearised (ModeParams.linearise_thrust);
-        # MANUAL and the thruster action send the mixer's or the policy's commands as they are
+        # MANUAL and the thruster action send the mixer's or the policy's commands as they are. ALT_HOLD
+        # and POSHOLD fly on an autopilot too, and only in the compiled stack (no numpy twin)
+        self.mode = mode
+        self.autopilot = mode != "manual"
         self.stabilized = mode == "stabilize"
         self.linearise = self.stabilized and first.sim.mode_params.linearise_thrust
-        self.flight = BatchedStabilize(mode, num_envs, first.sim.mode_params)
+        self.flight = (
+            BatchedStabilize(mode, num_envs, first.sim.mode_params) if mode in BATCHED_MODES else None
+        )
         self.estimator = BatchedDeadReckoning(first.sim._estimators[self.robot].params, num_envs)
         self.pilot_gain = first.sim.mode_params.pilot_gain
         spec = first.sim._specs[self.robot]
@@ -264,7 +278,7 @@ class BatchedPoseEnv(VectorEnv):
         self.estimator.load(row, sim._estimators[robot])
         if self.stabilized:
             self.flight.load(row, sim._autopilots[robot].controller)
-        else:
+        elif self.flight is not None:
             self.flight.time_s[row] = 0.0
         sensors = sim._sensors[robot]
         self.accel_bias[row], self.gyro_bias[row] = sensors.accel_bias, sensors.gyro_bias
@@ -334,6 +348,11 @@ class BatchedPoseEnv(VectorEnv):
         pilot = a if self.thrusters_action else self.pilot_gain.apply(a)
         if self._native_ready():
             energy, touching = self._fly_native(pilot, rows)
+        elif self.flight is None:
+            raise RuntimeError(
+                f"{self.mode.upper()} is batched only by the compiled flight stack, which cannot run now "
+                f"(hydrodynamics callback: {hydrodynamics.installed_backend()})"
+            )
         else:
             noise = self._draw_noise(rows)
             blowing = [self.envs[row] for row in rows if self.envs[row].episode_turbulence_m_s > 0]
@@ -374,10 +393,10 @@ class BatchedPoseEnv(VectorEnv):
     def _fly_native(self, pilot: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The step's control periods for ``rows`` in one call of the compiled flight stack; each row's
         summed mean squared thruster command and periods in contact. STABILIZE runs in the C on each
-        robot's pilot command; MANUAL and the thruster action send their commands to the thrusters here,
-        held for the step, as a one-robot simulation does."""
+        robot's pilot command (ALT_HOLD and POSHOLD too); MANUAL and the thruster action send their
+        commands to the thrusters here, held for the step, as a one-robot simulation does."""
         o, state, periods = self._offsets, self._state, self.periods_per_step
-        if self.stabilized:
+        if self.autopilot:
             state[rows, o["PILOT"] : o["PILOT"] + 6] = pilot[rows]
         else:
             self._drive(pilot)
