@@ -59,6 +59,8 @@ def library() -> ctypes.CDLL | None:
                 ]
                 # pointers travel as addresses (c_void_p): numpy's ctypes.data_as costs microseconds a call
                 pointer = ctypes.c_void_p
+                # periods, substeps per period, period (s), physics time per period (s), path step (m)
+                timing = [ctypes.c_int, ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double]
                 lib.maptidal_flight_periods.restype = ctypes.c_int
                 lib.maptidal_flight_periods.argtypes = [
                     pointer,  # mjModel*
@@ -68,11 +70,7 @@ def library() -> ctypes.CDLL | None:
                     ctypes.c_int,  # robots
                     pointer,  # estimator order, int
                     ctypes.c_int,  # estimators
-                    ctypes.c_int,  # periods
-                    ctypes.c_int,  # substeps
-                    ctypes.c_double,  # period (s)
-                    ctypes.c_double,  # physics time per period (s)
-                    ctypes.c_double,  # path step (m)
+                    *timing,
                     pointer,  # noise, double
                     pointer,  # currents, double, or NULL
                     pointer,  # current slots, int
@@ -87,11 +85,7 @@ def library() -> ctypes.CDLL | None:
                     pointer,  # params, a double block per simulation
                     pointer,  # state, a double block per simulation
                     pointer,  # active, int per simulation
-                    ctypes.c_int,  # periods
-                    ctypes.c_int,  # substeps
-                    ctypes.c_double,  # period (s)
-                    ctypes.c_double,  # physics time per period (s)
-                    ctypes.c_double,  # path step (m)
+                    *timing,
                     pointer,  # noise, double
                     ctypes.c_int,  # draws per simulation
                     pointer,  # currents, double (simulations x periods x 3)
