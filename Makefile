@@ -33,7 +33,7 @@ $(STAMP): pyproject.toml requirements.lock envs/_hydro.c envs/_flight.c
 	$(BIN)/python -m pip install -q --no-deps -e .
 	# compile the C hydrodynamics callback and flight stack (numpy and Python take over without a compiler)
 	$(BIN)/python -c "from maptidal.envs.hydrodynamics import build_native; print('hydrodynamics library:', build_native())"
-	$(BIN)/python -c "from maptidal.envs.native_flight import library; print('flight library:', library())"
+	$(BIN)/python -c "from maptidal.envs.native_flight import library; print('flight library:', getattr(library(), '_name', None))"
 	touch $(STAMP)
 
 run: setup
