@@ -344,16 +344,23 @@ class NativeFlight:
 
     # ----- packing ------------------------------------------------------------------------------
     def _key(self, robot: str) -> tuple:
+        """The objects ``robot``'s parameters come from; a new object anywhere means packing again (they
+        are frozen dataclasses or replaced whole, never changed in place)."""
         sim = self.sim
         autopilot = sim._autopilots.get(robot)
+        controller = autopilot.controller if autopilot is not None else None
+        estimator = sim._estimators.get(robot)
         return (
-            autopilot.controller if autopilot is not None else None,
-            sim._estimators.get(robot),
+            controller,
+            estimator,
             sim._plants[robot],
             sim._thruster_gains[robot],
             sim._sensors[robot].noise,
             sim._mixers[robot],
             sim.mode_params,
+            controller.params if controller is not None else None,
+            estimator.params if estimator is not None else None,
+            sim._vehicle_models[robot],
         )
 
     def _pack_params(self, k: int, robot: str) -> None:
@@ -363,7 +370,7 @@ class NativeFlight:
         old = self._params_key[k]
         if old is not None and all(a is b for a, b in zip(old, key, strict=True)):
             return
-        controller, estimator, plant, gains, noise, mixer, mode_params = key
+        controller, estimator, plant, gains, noise, mixer, mode_params, *_ = key
         values = {
             **self._robot_params(robot),
             **_noise_params(noise),

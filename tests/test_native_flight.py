@@ -19,6 +19,7 @@ from maptidal.controllers.flight_modes import ModeParams
 from maptidal.controllers.position_control import PosControlGains
 from maptidal.envs import hydrodynamics, native_flight
 from maptidal.envs.scenario import load_scenario, with_frame
+from maptidal.envs.sensors import SensorNoise
 from maptidal.envs.simulation import Simulation, SimulationError
 
 pytestmark = pytest.mark.skipif(
@@ -257,3 +258,21 @@ def test_the_estimates_position_and_attitude_move_in_place_on_both_paths(backend
     assert sim.estimate("rov0").position is position and sim.estimate("rov0").rpy is rpy
     assert sim._sensors["rov0"].accel_bias is bias
     assert not np.array_equal(position, before)
+
+
+def test_changes_between_calls_reach_the_compiled_stack():
+    """New noise levels and a new flight mode between calls are packed again (the parameter cache keys on
+    the objects they come from), as the Python path reads them every period."""
+
+    def flown(backend: str) -> np.ndarray:
+        sim = Simulation(MISSION, flight_mode="stabilize", flight_backend=backend)
+        sim.reset(seed=5)
+        command = {"rov0": {"surge": 0.5, "heave": 0.4}, "rov1": {"yaw": 0.3}}
+        sim.step_periods(command, 20)
+        sim.set_sensor_noise("rov0", SensorNoise(accel_sigma=0.5, compass_sigma_deg=20.0))
+        sim.step_periods(command, 20)
+        sim.set_flight_mode("rov1", "alt_hold")
+        per_period = sim.step_periods(command, 20)
+        return record(sim, per_period)
+
+    np.testing.assert_allclose(flown("native"), flown("python"), rtol=0, atol=TOLERANCE)

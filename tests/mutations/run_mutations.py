@@ -763,6 +763,16 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         "AC_PID's integrator ignoring the limit flag",
         [("envs/_flight.c", "if (!limit || shrinking) {", "if (1) {")],
     ),
+    "N19": (
+        "the parameters packed once and never again",
+        [
+            (
+                "envs/native_flight.py",
+                "        if old is not None and all(a is b for a, b in zip(old, key, strict=True)):",
+                "        if old is not None:",
+            )
+        ],
+    ),
 }
 
 
