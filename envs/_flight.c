@@ -15,6 +15,7 @@
  * simulation's numpy generator in the order the Python code draws them, so both paths see the same
  * noise. */
 #include <math.h>
+#include <pthread.h>
 #include <string.h>
 #include <time.h>
 #include <mujoco/mujoco.h>
@@ -708,20 +709,65 @@ int maptidal_flight_periods(const mjModel* m, mjData* d, const double* params, d
 
 /* A batch of simulations with one robot each (the batched vector environment): maptidal_flight_periods
  * on each active one, with its own blocks, noise (draws_per_sim each), currents (periods x 3 where
- * blowing, else none) and per-period outputs (periods x 2). ran: the periods each flew. */
+ * blowing, else none) and per-period outputs (periods x 2). ran: the periods each flew. The simulations
+ * are independent (their own mjModel and mjData), so n_threads threads share them out, each a
+ * contiguous run of them; the results do not depend on the number of threads. */
+typedef struct {
+  const mjModel* const* models;
+  mjData* const* datas;
+  double *params, *state, *per_period, wall;
+  const double *noise, *currents;
+  const int *active, *blowing;
+  int *ran, first_sim, last_sim, n_periods, substeps, draws_per_sim, current_slot;
+  double period_s, seconds, path_step;
+} BatchPart;
+
+static void* fly_part(void* argument) {
+  BatchPart* b = (BatchPart*)argument;
+  int pn = param_offsets[N_PARAM_FIELDS], sn = state_offsets[N_STATE_FIELDS], first = 0;
+  for (int i = b->first_sim; i < b->last_sim; i++) {
+    if (!b->active[i]) continue;
+    b->ran[i] = maptidal_flight_periods(
+        b->models[i], b->datas[i], b->params + i * pn, b->state + i * sn, 1, &first, 1, b->n_periods,
+        b->substeps, b->period_s, b->seconds, b->path_step, b->noise + i * b->draws_per_sim,
+        b->blowing[i] ? b->currents + 3 * b->n_periods * i : NULL, &b->current_slot,
+        b->per_period + 2 * b->n_periods * i, &b->wall);
+  }
+  return NULL;
+}
+
+#define MAX_BATCH_THREADS 256
+
 void maptidal_flight_batch(int n_sims, const mjModel* const* models, mjData* const* datas, double* params,
                            double* state, const int* active, int n_periods, int substeps, double period_s,
                            double seconds, double path_step, const double* noise, int draws_per_sim,
                            const double* currents, const int* blowing, int current_slot,
-                           double* per_period, int* ran, double* wall) {
-  make_layout();
-  int pn = param_offsets[N_PARAM_FIELDS], sn = state_offsets[N_STATE_FIELDS], first = 0;
-  for (int i = 0; i < n_sims; i++) {
-    if (!active[i]) continue;
-    ran[i] = maptidal_flight_periods(models[i], datas[i], params + i * pn, state + i * sn, 1, &first, 1,
-                                     n_periods, substeps, period_s, seconds, path_step,
-                                     noise + i * draws_per_sim,
-                                     blowing[i] ? currents + 3 * n_periods * i : NULL, &current_slot,
-                                     per_period + 2 * n_periods * i, wall);
+                           double* per_period, int* ran, double* wall, int n_threads) {
+  make_layout();  /* before any thread reads the layout */
+  if (n_threads > n_sims) n_threads = n_sims;
+  if (n_threads > MAX_BATCH_THREADS) n_threads = MAX_BATCH_THREADS;
+  if (n_threads < 1) n_threads = 1;
+  BatchPart parts[MAX_BATCH_THREADS];
+  pthread_t threads[MAX_BATCH_THREADS];
+  int started[MAX_BATCH_THREADS];
+  for (int t = 0; t < n_threads; t++) {
+    BatchPart* b = &parts[t];
+    b->models = models, b->datas = datas, b->params = params, b->state = state;
+    b->per_period = per_period, b->wall = 0.0, b->noise = noise, b->currents = currents;
+    b->active = active, b->blowing = blowing, b->ran = ran;
+    b->first_sim = (int)((long)n_sims * t / n_threads), b->last_sim = (int)((long)n_sims * (t + 1) / n_threads);
+    b->n_periods = n_periods, b->substeps = substeps, b->draws_per_sim = draws_per_sim;
+    b->current_slot = current_slot, b->period_s = period_s, b->seconds = seconds, b->path_step = path_step;
+    /* this thread flies the first part itself; a part whose thread cannot start is flown here too */
+    started[t] = t > 0 && pthread_create(&threads[t], NULL, fly_part, b) == 0;
   }
+  fly_part(&parts[0]);
+  for (int t = 1; t < n_threads; t++) {
+    if (started[t]) {
+      pthread_join(threads[t], NULL);
+    } else {
+      fly_part(&parts[t]);
+    }
+  }
+  for (int t = 0; t < n_threads; t++) *wall += parts[t].wall;
 }

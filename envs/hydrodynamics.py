@@ -339,7 +339,7 @@ def build_library(
             directory.mkdir(parents=True, exist_ok=True)
             partial = target.with_suffix(f".{os.getpid()}.tmp")
             # -ffp-contract=off: no fused multiply-adds, so the C computes what the Python reference does
-            command = [compiler, "-O2", "-ffp-contract=off", "-shared", "-fPIC", f"-I{include}"]
+            command = [compiler, "-O2", "-ffp-contract=off", "-pthread", "-shared", "-fPIC", f"-I{include}"]
             command += ["-o", str(partial), str(source_path), *link, "-lm"]
             subprocess.run(command, check=True, capture_output=True, timeout=120)
             os.replace(partial, target)  # atomic: parallel builders never load a half-written file

@@ -93,7 +93,8 @@ def library() -> ctypes.CDLL | None:
                     ctypes.c_int,  # where a robot's current lives in userdata
                     pointer,  # per period out, double (simulations x periods x 2)
                     pointer,  # ran, int per simulation
-                    pointer,  # wall time in mj_step (s), double
+                    pointer,  # wall time in mj_step (s), double, summed over threads
+                    ctypes.c_int,  # threads
                 ]
                 _library = lib
             except OSError as error:

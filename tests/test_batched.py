@@ -352,3 +352,24 @@ def test_the_readme_example_of_the_batch_runs():
     exec(compile(block, "README.md", "exec"), scope)
     assert isinstance(scope["envs"], BatchedPoseEnv) and scope["rewards"].shape == (8,)
     scope["envs"].close()
+
+
+def test_the_compiled_batch_gives_the_same_on_any_number_of_threads():
+    """Its robots are independent simulations: shared out over threads they fly what one thread flies,
+    bit for bit (with turbulence, randomisation and an episode end)."""
+    options = {"num_envs": 5, "max_episode_steps": 6, "flat_obs": True, "randomize": True}
+    runs = []
+    for threads in (1, 2, 4):
+        env = gymnasium.make_vec("MapTidal/StationKeeping-v1", threads=threads, **options)
+        assert env.native and env.threads == threads
+        observations = [env.reset(seed=21)[0]]
+        rng = np.random.default_rng(3)
+        for _ in range(9):
+            observation, reward, *_ = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
+            observations += [observation, reward]
+        env.close()
+        runs.append(np.concatenate([np.ravel(v) for v in observations]))
+    np.testing.assert_array_equal(runs[0], runs[1])
+    np.testing.assert_array_equal(runs[0], runs[2])
+    with pytest.raises(ValueError, match="threads"):
+        BatchedPoseEnv("go_to_pose", 2, threads=0)

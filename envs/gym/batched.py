@@ -93,6 +93,7 @@ def make_vector(task: str, num_envs: int = 1, **kwargs) -> VectorEnv:
     if why is None:
         return BatchedPoseEnv(task, num_envs, **kwargs)
     gymnasium.logger.warn(f"MapTidal {task}: a SyncVectorEnv, not the batched environment: {why}")
+    kwargs.pop("threads", None)  # a SyncVectorEnv steps its environments one after another
     env_class = _task_class(task)
     limit = kwargs.pop("max_episode_steps", None)
 
@@ -142,7 +143,9 @@ class BatchedPoseEnv(VectorEnv):
 
     ## Arguments
 
-    ``task`` ("go_to_pose" or "station_keeping"), ``num_envs``, ``max_episode_steps``, and the one-robot
+    ``task`` ("go_to_pose" or "station_keeping"), ``num_envs``, ``max_episode_steps``, ``threads`` (how
+    many threads the compiled batch shares its robots out over: by default one per CPU the process may
+    use, at most one per robot; the results do not depend on it), and the one-robot
     task's keyword arguments (``action``, ``flat_obs``, ``control_period_s``, ``pilot_gain``,
     ``flight_mode`` "stabilize" or "manual", or "alt_hold" or "poshold" on the compiled stack,
     ``randomize``, StationKeeping's ``max_current_m_s`` and ``turbulence_m_s``). Actions outside [-1, 1]
@@ -152,9 +155,22 @@ class BatchedPoseEnv(VectorEnv):
 
     metadata: ClassVar[dict] = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
-    def __init__(self, task: str, num_envs: int = 1, max_episode_steps: int | None = None, **kwargs) -> None:
+    def __init__(
+        self,
+        task: str,
+        num_envs: int = 1,
+        max_episode_steps: int | None = None,
+        threads: int | None = None,
+        **kwargs,
+    ) -> None:
         if not (isinstance(num_envs, int) and num_envs >= 1):
             raise ValueError(f"num_envs must be a whole number >= 1, got {num_envs!r}")
+        if threads is None:
+            threads = min(num_envs, _usable_cpus())
+        if not (isinstance(threads, int) and not isinstance(threads, bool) and threads >= 1):
+            raise ValueError(f"threads must be a whole number >= 1, got {threads!r}")
+        # the compiled batch shares its robots out over this many threads (the numpy batch runs on one)
+        self.threads = min(threads, num_envs)
         why = unbatchable(kwargs)
         if why is not None:
             raise ValueError(f"these arguments cannot be batched: {why}")
@@ -434,6 +450,7 @@ class BatchedPoseEnv(VectorEnv):
             self._per_period.ctypes.data,
             self._ran.ctypes.data,
             self._wall.ctypes.data,
+            self.threads,
         )
         failed = np.flatnonzero(self._ran < periods)
         if len(failed):
@@ -596,6 +613,13 @@ class BatchedPoseEnv(VectorEnv):
         """Close every sub-environment."""
         for env in self.envs:
             env.close()
+
+
+def _usable_cpus() -> int:
+    """The CPUs this process may run on (its affinity, where the system tells it), at least 1."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
 
 
 def _only_rows(infos: dict, rows: np.ndarray) -> dict:
