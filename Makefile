@@ -56,6 +56,7 @@ bench: setup
 	$(BIN)/python tests/bench/bench_sim.py
 	$(BIN)/python tests/bench/bench_allocation.py
 	$(BIN)/python tests/bench/bench_gym.py
+	$(BIN)/python tests/bench/bench_batched.py --envs 16 64
 	$(BIN)/python tests/bench/bench_frontend.py
 	$(BIN)/python tests/bench/bench_relocalisation.py
 	$(BIN)/python tests/bench/bench_mission.py
