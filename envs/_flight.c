@@ -624,7 +624,7 @@ static int bad_state_warnings(const mjData* d) {
 }
 
 /* Run n_periods control periods of n_robots robots (blocks of params and state, one per robot, in the
- * simulation's robot order), each period_s long and seconds of physics (substeps steps). noise: the
+ * simulation's robot order), each period_s long (substeps physics steps). noise: the
  * standard normal draws, 6 per robot (the bias walks) then the reads of each estimating robot in
  * estimator_order (the Python's update order), per period; currents: NULL or 3 per period, the water current to set at
  * each period's start (current_slots: where each robot's current lives in userdata). per_period: 2 per
@@ -633,7 +633,7 @@ static int bad_state_warnings(const mjData* d) {
  * the state went bad (NaN or a MuJoCo reset) in the next one. wall: the seconds spent in mj_step. */
 int maptidal_flight_periods(const mjModel* m, mjData* d, const double* params, double* state,
                             int n_robots, const int* estimator_order, int n_estimators, int n_periods,
-                            int substeps, double period_s, double seconds, double path_step,
+                            int substeps, double period_s, double path_step,
                             const double* noise, const double* currents, const int* current_slots,
                             double* per_period, double* wall) {
   make_layout();
@@ -667,14 +667,14 @@ int maptidal_flight_periods(const mjModel* m, mjData* d, const double* params, d
       const double* p = params + r * pn;
       double* s = state + r * sn;
       int touching = d->ncon ? robot_touching(m, d, (int)*P(BODY_ID)) : 0;
-      count_odometry(p, s, d, seconds, touching, path_step);
+      count_odometry(p, s, d, period_s, touching, path_step);
       double* out = per_period + 2 * (t * n_robots + r);
       int n = (int)*P(N_THR);
       double sq = 0.0;
       for (int i = 0; i < n; i++) sq += S(OUTPUTS)[i] * S(OUTPUTS)[i];
       out[0] = sq / n, out[1] = touching;
     }
-    double root = sqrt(seconds);
+    double root = sqrt(period_s);
     for (int r = 0; r < n_robots; r++) {
       const double* p = params + r * pn;
       double* s = state + r * sn;
@@ -719,7 +719,7 @@ typedef struct {
   const double *noise, *currents;
   const int *active, *blowing;
   int *ran, first_sim, last_sim, n_periods, substeps, draws_per_sim, current_slot;
-  double period_s, seconds, path_step;
+  double period_s, path_step;
 } BatchPart;
 
 static void* fly_part(void* argument) {
@@ -729,7 +729,7 @@ static void* fly_part(void* argument) {
     if (!b->active[i]) continue;
     b->ran[i] = maptidal_flight_periods(
         b->models[i], b->datas[i], b->params + i * pn, b->state + i * sn, 1, &first, 1, b->n_periods,
-        b->substeps, b->period_s, b->seconds, b->path_step, b->noise + i * b->draws_per_sim,
+        b->substeps, b->period_s, b->path_step, b->noise + i * b->draws_per_sim,
         b->blowing[i] ? b->currents + 3 * b->n_periods * i : NULL, &b->current_slot,
         b->per_period + 2 * b->n_periods * i, &b->wall);
   }
@@ -740,7 +740,7 @@ static void* fly_part(void* argument) {
 
 void maptidal_flight_batch(int n_sims, const mjModel* const* models, mjData* const* datas, double* params,
                            double* state, const int* active, int n_periods, int substeps, double period_s,
-                           double seconds, double path_step, const double* noise, int draws_per_sim,
+                           double path_step, const double* noise, int draws_per_sim,
                            const double* currents, const int* blowing, int current_slot,
                            double* per_period, int* ran, double* wall, int n_threads) {
   make_layout();  /* before any thread reads the layout */
@@ -757,7 +757,7 @@ void maptidal_flight_batch(int n_sims, const mjModel* const* models, mjData* con
     b->active = active, b->blowing = blowing, b->ran = ran;
     b->first_sim = (int)((long)n_sims * t / n_threads), b->last_sim = (int)((long)n_sims * (t + 1) / n_threads);
     b->n_periods = n_periods, b->substeps = substeps, b->draws_per_sim = draws_per_sim;
-    b->current_slot = current_slot, b->period_s = period_s, b->seconds = seconds, b->path_step = path_step;
+    b->current_slot = current_slot, b->period_s = period_s, b->path_step = path_step;
     /* this thread flies the first part itself; a part whose thread cannot start is flown here too */
     started[t] = t > 0 && pthread_create(&threads[t], NULL, fly_part, b) == 0;
   }

@@ -29,6 +29,7 @@ from maptidal.controllers.flight_modes import FLIGHT_MODES
 from maptidal.controllers.mixing import _FORWARD_COUPLING_DIRECTION, FRAMES
 from maptidal.controllers.pose import _force_matrix
 from maptidal.envs import hydrodynamics
+from maptidal.envs.native_build import build_library
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +47,7 @@ def library() -> ctypes.CDLL | None:
     global _library, _tried
     if not _tried:
         _tried = True
-        path = hydrodynamics.build_library(_SOURCE, "flight", link_mujoco=True)
+        path = build_library(_SOURCE, "flight", link_mujoco=True)
         if path is not None:
             try:
                 lib = ctypes.CDLL(str(path))
@@ -59,8 +60,8 @@ def library() -> ctypes.CDLL | None:
                 ]
                 # pointers travel as addresses (c_void_p): numpy's ctypes.data_as costs microseconds a call
                 pointer = ctypes.c_void_p
-                # periods, substeps per period, period (s), physics time per period (s), path step (m)
-                timing = [ctypes.c_int, ctypes.c_int, ctypes.c_double, ctypes.c_double, ctypes.c_double]
+                # periods, substeps per period, period (s), path step (m)
+                timing = [ctypes.c_int, ctypes.c_int, ctypes.c_double, ctypes.c_double]
                 lib.maptidal_flight_periods.restype = ctypes.c_int
                 lib.maptidal_flight_periods.argtypes = [
                     pointer,  # mjModel*
@@ -556,6 +557,38 @@ class NativeFlight:
         j = o["VERTEX"]
         odometry.last_vertex = tuple(v[j : j + 3]) if v[o["VERTEX_SET"]] else None
 
+    def blocks(self, robot: str) -> tuple[np.ndarray, np.ndarray]:
+        """``robot``'s parameter and state blocks as its simulation's objects hold them now, its last
+        readings included (copies): where a batch that flies the robot in its own blocks starts from."""
+        k = self.sim.robots.index(robot)
+        self._pack_params(k, robot)
+        self._pack_state(k, robot)
+        state = self.state[k].copy()
+        readings, o = self.sim._readings.get(robot, {}), self._offsets
+
+        def put(name: str, values) -> None:
+            values = np.ravel(np.asarray(values, float))
+            state[o[name] : o[name] + len(values)] = values
+
+        if "imu" in readings:
+            put("R_ACCEL", readings["imu"]["accel"])
+            put("R_GYRO", readings["imu"]["gyro"])
+        if "depth" in readings:
+            put("R_DEPTH", readings["depth"]["depth_m"])
+            put("R_PRESSURE", readings["depth"]["pressure_pa"])
+        if "dvl" in readings:
+            dvl = readings["dvl"]
+            put("R_DVL_VALID", dvl["valid"])
+            if dvl["velocity_body"] is not None:
+                put("R_DVL_VELOCITY", dvl["velocity_body"])
+        if "compass" in readings:
+            put("R_HEADING", readings["compass"]["heading_deg"])
+            put("R_FIELD", readings["compass"]["field_gauss"])
+        if "thrust" in readings:
+            put("R_THRUST", readings["thrust"]["force_body"])
+            put("R_THRUST_SET", 1.0)
+        return self.params[k].copy(), state
+
     def _readings(self, robot: str, v: list[float]) -> dict:
         """The last period's readings as :meth:`RobotSensors.read` gives them (and the thrust reading
         the simulation adds without a DVL fix), from the state's values ``v``."""
@@ -631,7 +664,6 @@ class NativeFlight:
             len(order),
             n_periods,
             scenario.substeps,
-            scenario.substeps * scenario.timestep_s,
             scenario.substeps * scenario.timestep_s,
             self.path_step_m,
             self._noise_address,

@@ -639,11 +639,7 @@ class Simulation:
             per_period, ran = self._native.run(n_periods, currents)
             if ran < n_periods:
                 period = self.scenario.substeps * self.scenario.timestep_s
-                raise SimulationError(
-                    f"the physics state became NaN or diverged in the {self.scenario.substeps} steps after "
-                    f"t = {time_before + ran * period:.3f} s; "
-                    f"last thruster commands {self.data.ctrl.round(3).tolist()}. Reset the simulation."
-                )
+                raise self._diverged(self.scenario.substeps, time_before + ran * period)
             return per_period
         per_period = np.zeros((n_periods, len(self.robots), 2))
         for t in range(n_periods):
@@ -704,12 +700,16 @@ class Simulation:
             sensors.advance(n_steps * self.scenario.timestep_s, self.rng)
         diverged = self._instability_warnings() > bad_before
         if diverged or not (np.isfinite(self.data.qpos).all() and np.isfinite(self.data.qvel).all()):
-            raise SimulationError(
-                f"the physics state became NaN or diverged in the {n_steps} steps after "
-                f"t = {time_before:.3f} s; "
-                f"last thruster commands {self.data.ctrl.round(3).tolist()}. Reset the simulation."
-            )
+            raise self._diverged(n_steps, time_before)
         return self.time
+
+    def _diverged(self, n_steps: int, time_before: float) -> SimulationError:
+        """The error for a state that went bad in the ``n_steps`` physics steps after ``time_before``."""
+        return SimulationError(
+            f"the physics state became NaN or diverged in the {n_steps} steps after "
+            f"t = {time_before:.3f} s; "
+            f"last thruster commands {self.data.ctrl.round(3).tolist()}. Reset the simulation."
+        )
 
     def _count_odometry(self, seconds: float) -> None:
         # the thrust at the period's end stands for the period: it lags its command by 0.1 s, five

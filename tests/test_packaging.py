@@ -128,7 +128,7 @@ def test_wheel_installed_in_a_fresh_venv_runs_compare_and_sim(tmp_path):
 def test_the_native_library_is_never_built_inside_an_installed_package(monkeypatch, tmp_path):
     from pathlib import Path
 
-    from maptidal.envs.hydrodynamics import build_dirs
+    from maptidal.envs.native_build import build_dirs
 
     monkeypatch.delenv("MAPTIDAL_CACHE", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))

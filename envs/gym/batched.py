@@ -322,14 +322,7 @@ class BatchedPoseEnv(VectorEnv):
             + [n.compass_sigma_deg]
         )
         if self.native:  # the robot's blocks, packed from its simulation's objects as one robot's are
-            flight = sim._native
-            flight._pack_params(0, robot)
-            flight._pack_state(0, robot)
-            self._params[row], self._state[row] = flight.params[0], flight.state[0]
-            o, state = self._offsets, self._state[row]  # and the readings the observation shows
-            state[o["R_ACCEL"] : o["R_ACCEL"] + 3] = readings["imu"]["accel"]
-            state[o["R_GYRO"] : o["R_GYRO"] + 3] = readings["imu"]["gyro"]
-            state[o["R_DEPTH"]] = readings["depth"]["depth_m"]
+            self._params[row], self._state[row] = sim._native.blocks(robot)
 
     def _refresh_views(self, row: int) -> None:
         sim = self.sims[row]
@@ -439,7 +432,6 @@ class BatchedPoseEnv(VectorEnv):
             active.ctypes.data,
             periods,
             self.substeps_per_period,
-            period_s,
             period_s,
             PATH_STEP_M,
             self._noise.ctypes.data,

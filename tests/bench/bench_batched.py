@@ -22,6 +22,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import gymnasium
 import mujoco
 import numpy as np
+from replay import record_periods
 
 import maptidal.envs  # noqa: F401  (registers MapTidal/)
 
@@ -96,29 +97,12 @@ def record_controls(
     for k in range(n):
         env = gymnasium.make(env_id, **limit)
         env.reset(seed=k)
-        controls = recording(env.unwrapped.sim)
+        record = record_periods(env.unwrapped.sim)
         for _ in range(steps):
             env.step(actions[k])
-        per_robot.append(controls)
+        per_robot.append([ctrl for ctrl, _ in record])
         env.close()
     return [list(period) for period in zip(*per_robot, strict=True)]
-
-
-def recording(sim) -> list[np.ndarray]:
-    """Make ``sim`` fly one control period at a time and record its controls after each; the record."""
-    whole = sim.step_periods
-    controls: list[np.ndarray] = []
-
-    def one_period_at_a_time(commands, n_periods=1, mode="pilot", currents=None):
-        parts = []
-        for period in range(n_periods):
-            current = None if currents is None else currents[period : period + 1]
-            parts.append(whole(commands, 1, mode, current))
-            controls.append(sim.data.ctrl.copy())
-        return np.concatenate(parts)
-
-    sim.step_periods = one_period_at_a_time
-    return controls
 
 
 def main() -> None:

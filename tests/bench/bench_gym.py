@@ -16,6 +16,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is imported: it picks
 import gymnasium
 import mujoco
 import numpy as np
+from replay import record_periods
 
 import maptidal.envs  # noqa: F401
 
@@ -107,18 +108,7 @@ def interleaved_physics_ratio(
     for env in (measured, recorder, bare_env):
         env.reset(seed=0)
     sim = recorder.unwrapped.sim
-    whole_step = sim.step_periods
-    controls: list[tuple[np.ndarray, np.ndarray]] = []  # each period's controls and userdata (its current)
-
-    def one_period_at_a_time(commands, n_periods=1, mode="pilot", currents=None):
-        parts = []
-        for k in range(n_periods):
-            current = None if currents is None else currents[k : k + 1]
-            parts.append(whole_step(commands, 1, mode, current))
-            controls.append((sim.data.ctrl.copy(), sim.data.userdata.copy()))
-        return np.concatenate(parts)
-
-    sim.step_periods = one_period_at_a_time
+    controls = record_periods(sim)  # each period's controls and userdata (its current)
     for action in actions:
         recorder.step(action)
     bare_sim = bare_env.unwrapped.sim
@@ -135,10 +125,10 @@ def interleaved_physics_ratio(
         for action in actions[start : start + block]:
             measured.step(action)
         ours.append(time.perf_counter() - begin)
-        replay = controls[: block * periods]
+        replayed = controls[: block * periods]
         del controls[: block * periods]
         begin = time.perf_counter()
-        for ctrl, userdata in replay:
+        for ctrl, userdata in replayed:
             bare_sim.data.ctrl[:], bare_sim.data.userdata[:] = ctrl, userdata
             mujoco.mj_step(bare_sim.model, bare_sim.data, nstep=substeps)
         bare.append(time.perf_counter() - begin)

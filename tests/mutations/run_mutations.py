@@ -625,8 +625,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         "a reset row's readings left as the packed state has them (zeros; compiled batch)",
         [
             (
-                "envs/gym/batched.py",
-                '            state[o["R_ACCEL"] : o["R_ACCEL"] + 3] = readings["imu"]["accel"]',
+                "envs/native_flight.py",
+                '            put("R_ACCEL", readings["imu"]["accel"])',
                 "            pass",
             )
         ],
