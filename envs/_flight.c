@@ -623,6 +623,17 @@ static int bad_state_warnings(const mjData* d) {
          d->warning[mjWARN_BADQACC].number;
 }
 
+/* substeps MuJoCo steps, the sensors computed in the last only (envs/simulation.py step_physics): nothing
+ * reads them in between and they do not feed the dynamics, so the state and the final sensordata are
+ * those of the full loop, bit for bit. The model's flags are restored; each model is flown by one thread. */
+static void step_physics(mjModel* m, mjData* d, int substeps) {
+  int flags = m->opt.disableflags;
+  m->opt.disableflags = flags | mjDSBL_SENSOR;
+  for (int k = 0; k < substeps - 1; k++) mj_step(m, d);
+  m->opt.disableflags = flags;
+  if (substeps > 0) mj_step(m, d);
+}
+
 /* Run n_periods control periods of n_robots robots (blocks of params and state, one per robot, in the
  * simulation's robot order), each period_s long (substeps physics steps). noise: the
  * standard normal draws, 6 per robot (the bias walks) then the reads of each estimating robot in
@@ -660,7 +671,7 @@ int maptidal_flight_periods(const mjModel* m, mjData* d, const double* params, d
     int bad_before = bad_state_warnings(d);
     struct timespec start, stop;
     clock_gettime(CLOCK_MONOTONIC, &start);
-    for (int k = 0; k < substeps; k++) mj_step(m, d);
+    step_physics((mjModel*)m, d, substeps);
     clock_gettime(CLOCK_MONOTONIC, &stop);
     *wall += (stop.tv_sec - start.tv_sec) + 1e-9 * (stop.tv_nsec - start.tv_nsec);
     for (int r = 0; r < n_robots; r++) {

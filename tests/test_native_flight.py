@@ -276,3 +276,56 @@ def test_changes_between_calls_reach_the_compiled_stack():
         return record(sim, per_period)
 
     np.testing.assert_allclose(flown("native"), flown("python"), rtol=0, atol=TOLERANCE)
+
+
+def drive_into_wall(sim: Simulation) -> None:
+    """Full surge for 4 s, so that the later steps touch the wall (contacts, constraint forces)."""
+    for _ in range(200):
+        sim.step({robot: [1.0, 0.3, -0.2, 0.0, 0.0, 0.4] for robot in sim.robots})
+
+
+@pytest.mark.parametrize("backend", ["native", "python"])
+def test_a_period_is_plain_mj_steps_bit_for_bit(backend):
+    """Both paths compute the sensors only in a period's last physics step (``step_physics``); the
+    state and the sensor values a period ends with must be those of plain ``mj_step``, bit for bit, with
+    the controls the period drove, and the model's disable flags must be left as they were."""
+    import mujoco
+
+    sim = Simulation(MISSION, flight_mode="stabilize", flight_backend=backend)
+    sim.reset(seed=3)
+    drive_into_wall(sim)
+    flags = mujoco.mjtDisableBit.mjDSBL_WARMSTART  # a flag of the user's own, kept
+    sim.model.opt.disableflags = flags
+    twin = mujoco.MjData(sim.model)
+    touched = 0
+    for _ in range(40):
+        mujoco.mj_copyData(twin, sim.model, sim.data)
+        sim.step({robot: [1.0, 0.3, -0.2, 0.0, 0.0, 0.4] for robot in sim.robots})
+        assert sim.model.opt.disableflags == flags
+        twin.ctrl[:] = sim.data.ctrl  # what the period drove, held through it
+        for _ in range(sim.scenario.substeps):
+            mujoco.mj_step(sim.model, twin)
+        for field in ("qpos", "qvel", "act", "sensordata", "qacc"):
+            assert np.array_equal(getattr(twin, field), getattr(sim.data, field)), field
+        touched += sim.data.ncon > 0
+    assert touched > 0  # the wall was touched: constraint forces reached the accelerometer
+
+
+def test_step_physics_is_mj_step_bit_for_bit():
+    """The helper on its own, for any number of steps, against ``mj_step(nstep=...)``."""
+    import mujoco
+
+    from maptidal.envs.simulation import step_physics
+
+    sim = Simulation(MISSION, flight_backend="python")
+    sim.reset(seed=4)
+    drive_into_wall(sim)
+    reference = mujoco.MjData(sim.model)
+    mujoco.mj_copyData(reference, sim.model, sim.data)
+    for n in (1, 0, 7, 10, 2):
+        step_physics(sim.model, sim.data, n)
+        if n:
+            mujoco.mj_step(sim.model, reference, nstep=n)
+        for field in ("qpos", "qvel", "act", "sensordata"):
+            assert np.array_equal(getattr(reference, field), getattr(sim.data, field)), (n, field)
+        assert sim.model.opt.disableflags == 0

@@ -39,7 +39,6 @@ import os
 from typing import ClassVar
 
 import gymnasium
-import mujoco
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -55,7 +54,7 @@ from maptidal.controllers.thrusters import linearise_thrusters
 from maptidal.envs import hydrodynamics, native_flight
 from maptidal.envs.gym.core import CONTACT_COST_PER_S, MAX_EPISODE_S, POSITION_TOLERANCE_M, YAW_TOLERANCE_RAD
 from maptidal.envs.sensors import SENSORS
-from maptidal.envs.simulation import _BAD_STATE_WARNINGS, PATH_STEP_M, SimulationError
+from maptidal.envs.simulation import _BAD_STATE_WARNINGS, PATH_STEP_M, SimulationError, step_physics
 
 TASKS = ("go_to_pose", "station_keeping")
 NORMALS_PER_PERIOD = 17  # a robot's sensors' standard normals per control period (_draw_noise)
@@ -509,14 +508,14 @@ class BatchedPoseEnv(VectorEnv):
         if len(rows) == self.num_envs:  # the usual case, no row waiting on its reset: no indexing
             contacts = []
             for model, data in zip(models, datas, strict=True):
-                mujoco.mj_step(model, data, nstep=substeps)
+                step_physics(model, data, substeps)
                 contacts.append(data.ncon)
             touching = (np.array(contacts) > 0).astype(float)
         else:
             touching = np.zeros(self.num_envs)
             for row in rows.tolist():
                 data = datas[row]
-                mujoco.mj_step(models[row], data, nstep=substeps)
+                step_physics(models[row], data, substeps)
                 touching[row] = data.ncon > 0
         self.accel_bias += noise[:, 0:3]
         self.gyro_bias += noise[:, 3:6]

@@ -4,7 +4,7 @@ against a ``SyncVectorEnv`` of the same number of one-robot environments, and ag
 alternating blocks in one
 process so that a busy moment on a shared machine hits every side alike (median block times).
 
-    python tests/bench/bench_batched.py [--envs 16] [--steps 400] [--env-id MapTidal/GoToPose-v1]
+    python tests/bench/bench_batched.py [--envs 16] [--steps 400] [--env-id ID] [--threads N]
 
 Goals (issue [rl], part 6): batched >= 3x SyncVectorEnv at N = 16; the batched env.step <= 1.5x bare
 mj_step for the same physics time. Where the compiled flight stack runs, the batch flies every robot in
@@ -25,24 +25,32 @@ import numpy as np
 from replay import record_periods
 
 import maptidal.envs  # noqa: F401  (registers MapTidal/)
+from maptidal.envs.simulation import step_physics
 
 
-def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float]:
+def measure(env_id: str, n: int, steps: int, block: int = 20, threads: int | None = None) -> dict[str, float]:
     """Robot steps per second of each side, and the ratios. The bare side is MuJoCo alone doing the
     batch's very physics: a second batch reset with the same seed, whose robots get, period by period,
     the controls the batch's robots get (recorded beforehand by one-robot environments with the rows'
     seeds, flown one control period at a time: the compiled flight stack flies a robot alike alone and
     in a batch, and one period at a time as five) and are stepped by ``mj_step`` and nothing else, so
-    both sides integrate the same states and contacts."""
+    both sides integrate the same states and contacts. A third batch replays them with ``step_physics``
+    (the sensors computed only in each period's last step, where they are read, as the environments
+    step). ``threads``: the batch's threads (None: its default)."""
     # no episode ends within the measurement: a batch row that reset would leave its bare twin, which
     # is only stepped, on another trajectory (every side gets the same limit)
     limit = {"max_episode_steps": 10 * (steps + 10)}
-    batched = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **limit)
+    threading = {} if threads is None else {"threads": threads}
+    batched = gymnasium.make_vec(
+        env_id, num_envs=n, vectorization_mode="vector_entry_point", **limit, **threading
+    )
     sync = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="sync", **limit)
     twin = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **limit)
-    for vec in (batched, sync, twin):
+    lean_twin = gymnasium.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **limit)
+    for vec in (batched, sync, twin, lean_twin):
         vec.reset(seed=0)
     sims = [env.sim for env in twin.envs]
+    lean_sims = [env.sim for env in lean_twin.envs]
     substeps = twin.substeps_per_period
     rng = np.random.default_rng(0)
     actions = rng.uniform(-0.3, 0.3, (n, *batched.single_action_space.shape)).astype(np.float32)
@@ -55,6 +63,8 @@ def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float
     def run_sync() -> None:
         sync.step(actions)
 
+    lean_recorded = list(recorded)
+
     def run_bare() -> None:
         for _ in range(batched.periods_per_step):
             controls = recorded.pop(0)
@@ -62,7 +72,14 @@ def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float
                 sim.data.ctrl[:] = ctrl
                 mujoco.mj_step(sim.model, sim.data, nstep=substeps)
 
-    sides = {"batched": run_batched, "sync": run_sync, "bare mj_step": run_bare}
+    def run_lean() -> None:
+        for _ in range(batched.periods_per_step):
+            controls = lean_recorded.pop(0)
+            for sim, ctrl in zip(lean_sims, controls, strict=True):
+                sim.data.ctrl[:] = ctrl
+                step_physics(sim.model, sim.data, substeps)
+
+    sides = {"batched": run_batched, "sync": run_sync, "bare mj_step": run_bare, "lean bare": run_lean}
     for run in sides.values():  # warm-up
         for _ in range(3):
             run()
@@ -73,10 +90,13 @@ def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float
             for _ in range(block):
                 run()
             times[name].append(time.perf_counter() - start)
+    # to rounding: the numpy batch sums in another order than the one-robot environments that recorded
+    # the controls (the compiled batch matches them bit for bit)
     same = all(
-        np.allclose(a.sim.data.qpos, b.sim.data.qpos) for a, b in zip(batched.envs, twin.envs, strict=True)
+        np.allclose(a.sim.data.qpos, b.sim.data.qpos) and np.allclose(a.sim.data.qpos, c.sim.data.qpos)
+        for a, b, c in zip(batched.envs, twin.envs, lean_twin.envs, strict=True)
     )
-    for vec in (batched, sync, twin):
+    for vec in (batched, sync, twin, lean_twin):
         vec.close()
     rate = {name: n * block / float(np.median(values)) for name, values in times.items()}
     return {
@@ -84,6 +104,7 @@ def measure(env_id: str, n: int, steps: int, block: int = 20) -> dict[str, float
         "batched / sync": rate["batched"] / rate["sync"],
         "batched step / bare mj_step (time)": rate["bare mj_step"] / rate["batched"],
         "sync step / bare mj_step (time)": rate["bare mj_step"] / rate["sync"],
+        "batched step / bare with sensors only where read (time)": rate["lean bare"] / rate["batched"],
         "bare side flew the batch's trajectory (1 = yes)": float(same),
     }
 
@@ -111,10 +132,11 @@ def main() -> None:
     parser.add_argument("--envs", type=int, nargs="+", default=[16])
     parser.add_argument("--steps", type=int, default=400)
     parser.add_argument("--env-id", default="MapTidal/GoToPose-v1")
+    parser.add_argument("--threads", type=int, default=None, help="the batch's threads (default: its own)")
     args = parser.parse_args()
     for n in args.envs:
-        result = measure(args.env_id, n, args.steps)
-        print(f"{args.env_id}, N = {n}:")
+        result = measure(args.env_id, n, args.steps, threads=args.threads)
+        print(f"{args.env_id}, N = {n}, threads {args.threads or 'default'}:")
         for key, value in result.items():
             print(f"  {key}: {value:.2f}")
 

@@ -773,6 +773,31 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             )
         ],
     ),
+    "N20": (
+        "the sensors left off in a period's last physics step too",
+        [("envs/_flight.c", "  m->opt.disableflags = flags;\n  if (substeps > 0)", "  if (substeps > 0)")],
+    ),
+    "N21": (
+        "every physics step of a period without its sensors (step_physics, Python)",
+        [
+            (
+                "envs/simulation.py",
+                "mujoco.mj_step(model, data, nstep=n_steps - 1)",
+                "mujoco.mj_step(model, data, nstep=n_steps)",
+            ),
+            ("envs/simulation.py", "    if n_steps > 0:\n        mujoco.mj_step(model, data)\n", ""),
+        ],
+    ),
+    "N22": (
+        "the model's own disable flags dropped",
+        [
+            (
+                "envs/_flight.c",
+                "  m->opt.disableflags = flags | mjDSBL_SENSOR;",
+                "  m->opt.disableflags = mjDSBL_SENSOR;",
+            )
+        ],
+    ),
 }
 
 
