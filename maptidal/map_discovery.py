@@ -8,7 +8,9 @@ it) and adds five rules, each with its reason:
 
 1. **The robot's own fused map.** :class:`RobotMap` accumulates, keyframe after keyframe, every fused
    landmark of the keyframe (the front end's information-form fusion, so a landmark seen ten times sits
-   where its ten observations agree) and the water the camera saw through. Discovery reads that map, not
+   where its ten observations agree) and the water the camera saw through, and, with ``dense_depth``,
+   the keyframe's dense stereo depth (:meth:`RobotMap.add_surface`): a bare wall gives the front end's
+   keypoints few landmarks, and the dense depth maps it all the same. Discovery reads that map, not
    one keyframe's faces alone: one keyframe sees a strip of wall; the map holds the wall. A teammate is
    no structure: landmarks and faces about where its last acoustic message put it are left out.
 2. **Normals from local surface fits.** A face's normal is the smallest principal axis of the map points
@@ -115,6 +117,9 @@ class MapAwareParams:
     # which a surface would give landmarks too rough to map. Where a ray meets no surface this close, the
     # water there was looked at and held nothing to see
     look_range_m: float = 3.0
+    # fold each keyframe's dense stereo depth into the map (maptidal.perception.dense; the OAK-D computes
+    # it on the camera), so that bare walls, with few keypoints, are mapped too
+    dense_depth: bool = True
 
     def __post_init__(self) -> None:
         for name in (
@@ -240,6 +245,10 @@ class RobotMap:
     landmarks: dict[int, np.ndarray] = field(default_factory=dict)
     free_voxels: set[int] = field(default_factory=set)
     looked_voxels: set[int] = field(default_factory=set)
+    # dense stereo depth (maptidal.perception.dense): one point per coverage_voxel_m cell, the latest
+    surface: dict[int, np.ndarray] = field(default_factory=dict)
+    # points() stacked once per change of the map: discovery and exploration ask for it several times a frame
+    _stacked: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def add_keyframe(
         self,
@@ -260,9 +269,29 @@ class RobotMap:
         finite = np.isfinite(seen_points).all(axis=1)
         self._carve(camera, seen_points[finite])
         on_teammate = near_teammates(seen_points, teammates, self.params)
+        self._stacked = None
         for landmark, point, skip in zip(seen_ids.tolist(), seen_points, on_teammate.tolist(), strict=True):
             if np.all(np.isfinite(point)) and not skip:
                 self.landmarks[landmark] = point.copy()
+
+    def add_surface(
+        self, camera_position: np.ndarray, points: np.ndarray, teammates: np.ndarray | None = None
+    ) -> None:
+        """Fold in a keyframe's dense stereo depth (:func:`maptidal.perception.dense.dense_points`): carve
+        the rays from ``camera_position`` to ``points`` ``(N, 3)`` as for landmarks, and keep one point per
+        ``coverage_voxel_m`` cell (the latest), so that a bare wall, which gives the front end few
+        landmarks, is in the map too. Rows with NaNs, and points on a teammate, are skipped."""
+        camera = np.asarray(camera_position, float).reshape(3)
+        if not np.all(np.isfinite(camera)):
+            return
+        points = np.asarray(points, float).reshape(-1, 3)
+        points = points[np.isfinite(points).all(axis=1)]
+        self._carve(camera, points)
+        points = points[~near_teammates(points, teammates, self.params)]
+        keys = _packed(voxel_keys(points, self.params.coverage_voxel_m)).tolist()
+        self._stacked = None
+        for key, point in zip(keys, points, strict=True):
+            self.surface[key] = point
 
     def _carve(self, camera: np.ndarray, targets: np.ndarray) -> None:
         if len(targets) == 0:
@@ -356,10 +385,12 @@ class RobotMap:
         return int(free.sum())
 
     def points(self) -> np.ndarray:
-        """Every landmark's position ``(N, 3)``."""
-        if not self.landmarks:
-            return np.zeros((0, 3))
-        return np.stack(list(self.landmarks.values()))
+        """Every landmark's position and every dense surface point ``(N, 3)``: the map's surface."""
+        if self._stacked is None:
+            rows = list(self.landmarks.values()) + list(self.surface.values())
+            self._stacked = np.stack(rows) if rows else np.zeros((0, 3))
+            self._stacked.flags.writeable = False  # shared by every caller until the map changes
+        return self._stacked
 
     def seen_free(self, positions: np.ndarray) -> np.ndarray:
         """Whether each position's voxel was crossed by a ray of the robot's cameras."""

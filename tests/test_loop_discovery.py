@@ -211,3 +211,56 @@ def test_a_robot_that_stops_short_of_its_viewpoint_gives_the_task_up_only_once_s
         assert not mission._stalled(robot, here, True, 200.0 + 2 * params.stall_s)
     with pytest.raises(ValueError, match="stall_s"):
         MissionParams(stall_s=-1.0)
+
+
+@pytest.mark.parametrize("dense", [True, False])
+def test_each_keyframes_dense_depth_maps_the_walls_where_they_are(tmp_path, dense):
+    """With ``dense_depth`` on, every robot's map holds its keyframes' dense stereo points, and they lie
+    on the real tank's surface (the tank's own triangles, which the matching never sees); off, none."""
+    from scipy.spatial import cKDTree
+
+    scenario, _ = load_mission(None)
+    params = MissionParams(
+        duration_s=6.0,
+        seed=2,
+        perception_process=False,
+        plots=False,
+        map_aware=dataclasses.replace(MissionParams().map_aware, dense_depth=dense),
+    )
+    mission = Mission(scenario, params, tmp_path)
+    mission.run()
+    maps = mission.perception.maps
+    surface = [robot_map.surface for robot_map in maps.values()]
+    if not dense:
+        assert all(len(points) == 0 for points in surface)
+        return
+    assert all(len(points) > 100 for points in surface)
+    points = np.concatenate([np.stack(list(points.values())) for points in surface])
+    # the tank's surface sampled every 2 cm or finer on each triangle: a point's distance to the nearest
+    # sample is its distance to the surface within 1.5 cm
+    samples = []
+    for a, b, c in scenario.tank.scene_triangles():
+        n = max(
+            2, int(np.ceil(max(np.linalg.norm(b - a), np.linalg.norm(c - a), np.linalg.norm(c - b)) / 0.02))
+        )
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1))
+        keep = i + j <= n
+        u, v = i[keep] / n, j[keep] / n
+        samples.append(a + u[:, None] * (b - a) + v[:, None] * (c - a))
+    distance, _ = cKDTree(np.concatenate(samples)).query(points, k=1)
+    assert np.median(distance) < 0.03 and np.percentile(distance, 80) < 0.1
+
+
+def test_dense_depth_in_a_mission_file_must_be_true_or_false(tmp_path, capsys):
+    from maptidal.mission.config import load_mission
+    from maptidal.paths import asset
+
+    base = asset("scenarios", "mission.toml").read_text()
+    path = tmp_path / "mission.toml"
+    path.write_text(base + '\n[mission]\ndense_depth = "yes"\nduration_s = 5\n')
+    status = main(["run", "--scenario", str(path), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1 and "dense_depth must be true or false" in err[0]
+    path.write_text(base + "\n[mission]\ndense_depth = false\n")
+    _, settings = load_mission(path)
+    assert settings["map_aware"].dense_depth is False

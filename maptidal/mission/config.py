@@ -16,6 +16,7 @@
     discovery = "map-aware"  # maptidal's discovery in the loop: map-aware (the robot's own map) or paper
     explore = true         # map-aware robots with no task fly to their map's frontier (false: they do not)
     explore_radius_m = 3.0 # ... within this of where each was launched (maptidal.exploration)
+    dense_depth = true     # map-aware robots map each keyframe's dense stereo depth (false: keypoints only)
     [[mission.events]]
     time_s = 60
     kind = "fail"          # rov1 stops and falls silent
@@ -50,6 +51,7 @@ from maptidal.envs.scenario import (
     scenario_from_dict,
 )
 from maptidal.exploration import FrontierParams
+from maptidal.map_discovery import MapAwareParams
 from maptidal.mission.run import MissionEvent, MissionParams, check_events
 
 DEFAULT_MISSION = SCENARIO_DIR / "mission.toml"
@@ -70,6 +72,7 @@ MISSION_KEYS = {
     "discovery",
     "explore",
     "explore_radius_m",
+    "dense_depth",
 }
 # the [mission] keys that are not plain numbers, and what they must be
 SETTING_TYPES: dict[str, type] = {
@@ -81,6 +84,7 @@ SETTING_TYPES: dict[str, type] = {
     "perception_process": bool,
     "relocalise": bool,
     "explore": bool,
+    "dense_depth": bool,
 }
 EVENT_KEYS = {"time_s", "kind", "robot", "current", "duration_s", "robots"}
 
@@ -132,6 +136,8 @@ def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
     settings["events"] = tuple(events)
     if "discovery" in settings:  # MissionParams.discovery holds the paper's parameters; this is the mode
         settings["discovery_mode"] = settings.pop("discovery")
+    if "dense_depth" in settings:  # a setting of the robots' maps (MapAwareParams)
+        settings["map_aware"] = MapAwareParams(dense_depth=settings.pop("dense_depth"))
     if "explore_radius_m" in settings:
         try:
             settings["frontier"] = FrontierParams(explore_radius_m=float(settings.pop("explore_radius_m")))

@@ -28,6 +28,7 @@ from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
 from maptidal.executors import release_in_child, signals_held
 from maptidal.exploration import FrontierParams, explore_views
 from maptidal.map_discovery import RobotMap, discover_on_map
+from maptidal.perception.dense import dense_points
 from maptidal.perception.frontend import FrontEnd
 from maptidal.perception.recording import CameraPose
 
@@ -122,6 +123,11 @@ def perceive(
                 robot_map.carve_view(
                     pose.position, pose.rotation, front.intrinsics, mesh.vertices, mesh.faces
                 )
+                if robot_map.params.dense_depth:
+                    surface = dense_points(
+                        job.left, job.right, front.intrinsics, pose.position, pose.rotation
+                    )
+                    robot_map.add_surface(pose.position, surface, teammates=job.teammates)
                 found = discover_on_map(
                     robot_map,
                     mesh.vertices,

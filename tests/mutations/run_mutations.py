@@ -38,6 +38,7 @@ TANK_TESTS = ["tests/test_closed_tank.py", "tests/test_world_geometry.py"]
 SIGNAL_TESTS = ["tests/test_signals.py"]
 BATCHED_TESTS = ["tests/test_batched.py"]
 NATIVE_TESTS = ["tests/test_native_flight.py"]
+DENSE_TESTS = ["tests/test_dense_depth.py", "tests/test_map_discovery.py", "tests/test_loop_discovery.py"]
 TESTS_OF_GROUP = {
     "M": TESTS,
     "F": FLIGHT_TESTS,
@@ -48,6 +49,7 @@ TESTS_OF_GROUP = {
     "I": SIGNAL_TESTS,
     "B": BATCHED_TESTS,
     "N": NATIVE_TESTS,
+    "D": DENSE_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -770,6 +772,78 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "envs/native_flight.py",
                 "        if old is not None and all(a is b for a, b in zip(old, key, strict=True)):",
                 "        if old is not None:",
+            )
+        ],
+    ),
+    "D1": (
+        "dense depth without the baseline (z = f / d)",
+        [("maptidal/perception/dense.py", "z = k.fx * k.baseline_m / d", "z = k.fx / d")],
+    ),
+    "D2": (
+        "dense points turned by the camera's rotation transposed",
+        [
+            (
+                "maptidal/perception/dense.py",
+                "return position + camera @ rotation.T",
+                "return position + camera @ rotation",
+            )
+        ],
+    ),
+    "D3": (
+        "the far-range cut left out",
+        [("maptidal/perception/dense.py", "(z <= params.max_depth_m)", "(z < np.inf)")],
+    ),
+    "D4": (
+        "the map's dense points not carved to",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "        self._carve(camera, points)\n        points = points[~near",
+                "        points = points[~near",
+            )
+        ],
+    ),
+    "D5": (
+        "the map's surface without its dense points",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "rows = list(self.landmarks.values()) + list(self.surface.values())",
+                "rows = list(self.landmarks.values())",
+            )
+        ],
+    ),
+    "D6": (
+        "dense points on a teammate kept",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "        points = points[~near_teammates(points, teammates, self.params)]\n",
+                "",
+            )
+        ],
+    ),
+    "D7": (
+        "the loop's keyframes without their dense depth",
+        [("maptidal/mission/perception.py", "if robot_map.params.dense_depth:", "if False:")],
+    ),
+    "D8": (
+        "the map's stacked points kept after dense points are added",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "        self._stacked = None\n        for key, point in zip(keys",
+                "        for key, point in zip(keys",
+            )
+        ],
+    ),
+    "D9": (
+        "the map's stacked points kept after a keyframe's landmarks are added",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "        self._stacked = None\n        for landmark, point, skip",
+                "        for landmark, point, skip",
             )
         ],
     ),

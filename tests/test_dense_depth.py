@@ -1,0 +1,181 @@
+"""Dense stereo depth (maptidal.perception.dense) and its place in a robot's map: on pairs built by hand
+(a textured image and its copy shifted by a written disparity, so that the depth is f B / d by
+construction), on the simulator's own rendered walls against the renderer's depth buffer, and folded into
+a RobotMap."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from maptidal.map_discovery import MapAwareParams, RobotMap, near_teammates
+from maptidal.perception.dense import DenseDepthParams, dense_points, disparity_map
+from maptidal.perception.recording import CameraIntrinsics
+
+
+def mission_camera(**changes) -> CameraIntrinsics:
+    """The mission's 320 x 200 camera (f = 196 px, 7.5 cm baseline), with ``changes``."""
+    values = {
+        "width": 320,
+        "height": 200,
+        "fx": 196.0,
+        "fy": 196.0,
+        "cx": 160.0,
+        "cy": 100.0,
+        "baseline_m": 0.075,
+    }
+    return CameraIntrinsics(**{**values, **changes})
+
+
+def textured(rng, shape=(200, 400)) -> np.ndarray:
+    """A blotchy texture, as the tank's concrete: noise blurred at two scales."""
+    import cv2
+
+    fine = rng.uniform(0, 255, shape).astype(np.float32)
+    coarse = cv2.GaussianBlur(fine, (0, 0), 4.0)
+    image = 0.5 * cv2.GaussianBlur(fine, (0, 0), 1.0) + 2.0 * (coarse - coarse.mean()) + 128
+    return np.clip(image, 0, 255).astype(np.uint8)
+
+
+def shifted_pair(rng, disparity_of_column) -> tuple[np.ndarray, np.ndarray]:
+    """A left image and its right partner: each column x of the left image at disparity d(x) shows what
+    the right image holds at x - d (a whole-pixel shift, so no resampling blurs it)."""
+    scene = textured(rng)
+    width = 320
+    left = scene[:, 40 : 40 + width]
+    right = np.empty_like(left)
+    for x in range(width):
+        right[:, x] = scene[:, 40 + x + disparity_of_column(x)]
+    return left, right
+
+
+def test_a_fronto_parallel_plane_is_at_f_b_over_d():
+    rng = np.random.default_rng(0)
+    d = 12  # px: z = 196 x 0.075 / 12 = 1.225 m
+    left, right = shifted_pair(rng, lambda x: d)
+    k = mission_camera()
+    points = dense_points(left, right, k, np.zeros(3), np.eye(3))
+    assert len(points) > 0.7 * (320 // 8) * (200 // 8)
+    expected = k.fx * k.baseline_m / d
+    assert np.median(np.abs(points[:, 2] - expected)) < 0.01
+    # each point lies on its pixel's ray: x / z = (u - cx) / fx at a cell centre (u = 4, 12, ...)
+    u = points[:, 0] / points[:, 2] * k.fx + k.cx
+    assert np.allclose((u - 4) / 8, np.round((u - 4) / 8), atol=1e-6)
+
+
+def test_two_depths_side_by_side_are_told_apart():
+    rng = np.random.default_rng(1)
+    left, right = shifted_pair(rng, lambda x: 10 if x < 160 else 20)
+    k = mission_camera()
+    points = dense_points(left, right, k, np.zeros(3), np.eye(3))
+    u = points[:, 0] / points[:, 2] * k.fx + k.cx
+    near = points[(u > 180) & (u < 300), 2]
+    far = points[(u > 40) & (u < 140), 2]
+    assert np.median(far) == pytest.approx(k.fx * k.baseline_m / 10, abs=0.02)
+    assert np.median(near) == pytest.approx(k.fx * k.baseline_m / 20, abs=0.01)
+
+
+def test_the_pose_places_the_points_in_the_world():
+    rng = np.random.default_rng(2)
+    left, right = shifted_pair(rng, lambda x: 12)
+    k = mission_camera()
+    local = dense_points(left, right, k, np.zeros(3), np.eye(3))
+    # a camera at (1, 2, 3) looking along world +x (optical frame columns: right, down, forward)
+    rotation = np.column_stack([[0, -1, 0], [0, 0, -1], [1, 0, 0]]).astype(float)
+    position = np.array([1.0, 2.0, 3.0])
+    world = dense_points(left, right, k, position, rotation)
+    assert world.shape == local.shape
+    assert np.allclose(world, position + local @ rotation.T)
+    assert np.median(world[:, 0]) == pytest.approx(1.0 + k.fx * k.baseline_m / 12, abs=0.01)
+
+
+def test_a_bare_pair_and_far_points_give_nothing_and_a_lost_pose_gives_nothing():
+    k = mission_camera()
+    flat = np.full((200, 320), 128, np.uint8)
+    assert len(dense_points(flat, flat, k, np.zeros(3), np.eye(3))) == 0  # nothing to match
+    rng = np.random.default_rng(3)
+    left, right = shifted_pair(rng, lambda x: 4)  # 3.7 m: beyond max_depth_m
+    assert len(dense_points(left, right, k, np.zeros(3), np.eye(3))) == 0
+    near_left, near_right = shifted_pair(rng, lambda x: 12)
+    assert len(dense_points(near_left, near_right, k, np.full(3, np.nan), np.eye(3))) == 0
+
+
+def test_bad_input_is_refused():
+    with pytest.raises(ValueError, match="num_disparities"):
+        DenseDepthParams(num_disparities=20)
+    with pytest.raises(ValueError, match="block_size"):
+        DenseDepthParams(block_size=4)
+    with pytest.raises(ValueError, match="max_depth_m"):
+        DenseDepthParams(max_depth_m=math.nan)
+    with pytest.raises(ValueError, match="sizes differ"):
+        disparity_map(np.zeros((200, 320), np.uint8), np.zeros((200, 300), np.uint8), DenseDepthParams())
+
+
+def test_the_simulators_bare_wall_is_at_the_rendered_depth():
+    """A robot 1 m from the tank's plain side wall and looking at it: the dense depth against the
+    renderer's own depth buffer, which shares nothing with the matching."""
+    from maptidal.camera import StereoCameraParams
+    from maptidal.envs.simulation import Simulation
+
+    sim = Simulation("assets/scenarios/mission.toml", camera=StereoCameraParams(width=320, height=200))
+    sim.reset(seed=0)
+    sim.place("rov0", [-1.0, 0.7, 1.0], yaw_rad=math.radians(90.0))
+    left, right, depth, _ = sim.render_stereo("rov0", depth=True)
+    calibration = sim.intrinsics()
+    matrix = calibration["K"]
+    k = mission_camera(fx=matrix[0][0], fy=matrix[1][1], cx=matrix[0][2], cy=matrix[1][2])
+    points = dense_points(left, right, k, np.zeros(3), np.eye(3))
+    assert len(points) > 0.6 * (320 // 8) * (200 // 8)  # the bare wall gives depth almost everywhere
+    u = np.round(points[:, 0] / points[:, 2] * k.fx + k.cx).astype(int)
+    v = np.round(points[:, 1] / points[:, 2] * k.fy + k.cy).astype(int)
+    error = np.abs(points[:, 2] - depth[v, u])
+    assert np.median(error) < 0.02 and np.percentile(error, 90) < 0.05
+    sim.close()
+
+
+def test_a_map_folds_in_dense_depth_one_point_a_cell_and_carves_to_it():
+    params = MapAwareParams()
+    rng = np.random.default_rng(4)
+    # a wall at x = 2, points 3 cm apart (several to a 10 cm cell), seen from the origin
+    y, z = np.meshgrid(np.arange(-0.5, 0.5, 0.03), np.arange(0.5, 1.5, 0.03))
+    wall = np.column_stack([np.full(y.size, 2.0), y.ravel(), z.ravel()]) + rng.normal(0, 0.002, (y.size, 3))
+    camera = np.array([0.0, 0.0, 1.0])
+    dense = RobotMap(params)
+    dense.add_surface(camera, wall)
+    cells = np.unique(np.floor(wall / params.coverage_voxel_m), axis=0)
+    assert len(dense.surface) == len(cells) == len(dense.points())
+    # the rays carved are those a keyframe's landmarks at the same places carve
+    keyed = RobotMap(params)
+    keyed.add_keyframe(camera, np.arange(len(wall)), wall)
+    assert dense.free_voxels == keyed.free_voxels and len(dense.free_voxels) > 0
+    # landmarks and dense points together are the map's surface
+    keyed.add_surface(camera, wall)
+    assert len(keyed.points()) == len(wall) + len(cells)
+
+
+def test_dense_points_on_a_teammate_or_with_nans_are_not_kept():
+    params = MapAwareParams()
+    robot_map = RobotMap(params)
+    points = np.array([[2.0, 0.0, 1.0], [2.0, 1.0, 1.0], [np.nan, 0.0, 0.0]])
+    teammate = np.array([[2.0, 1.0, 1.0, 0.0]])
+    robot_map.add_surface(np.array([0.0, 0.0, 1.0]), points, teammates=teammate)
+    kept = robot_map.points()
+    assert len(kept) == 1 and np.allclose(kept[0], points[0])
+    assert not near_teammates(kept, teammate, params).any()
+    robot_map.add_surface(np.full(3, np.nan), points)  # a lost pose adds nothing
+    assert len(robot_map.points()) == 1
+
+
+def test_the_maps_points_follow_every_change():
+    """points() is stacked once per change of the map: asked between changes it must still show each."""
+    robot_map = RobotMap(MapAwareParams())
+    camera = np.array([0.0, 0.0, 1.0])
+    assert robot_map.points().shape == (0, 3)
+    robot_map.add_keyframe(camera, np.array([7]), np.array([[2.0, 0.0, 1.0]]))
+    assert len(robot_map.points()) == 1
+    robot_map.add_surface(camera, np.array([[2.0, 0.5, 1.0]]))
+    assert len(robot_map.points()) == 2
+    robot_map.add_keyframe(camera, np.array([7]), np.array([[2.0, 0.1, 1.0]]))  # landmark 7 moves
+    assert np.allclose(robot_map.points()[0], [2.0, 0.1, 1.0])
