@@ -229,6 +229,25 @@ def near_teammates(points: np.ndarray, teammates: np.ndarray | None, params: Map
     return near
 
 
+class _PointTable:
+    """Points by key as the rows of a growing array: a new key takes the next row, a known key keeps its
+    row (as a dict keeps a key's first place), so the rows are in the order a dict's values would be."""
+
+    def __init__(self) -> None:
+        self._row: dict[int, int] = {}
+        self._array = np.zeros((256, 3))
+
+    def put(self, key: int, point: np.ndarray) -> None:
+        row = self._row.setdefault(key, len(self._row))
+        if row == len(self._array):
+            self._array = np.concatenate([self._array, np.zeros_like(self._array)])
+        self._array[row] = point
+
+    def rows(self) -> np.ndarray:
+        """The points ``(N, 3)``, a view valid until the next :meth:`put`."""
+        return self._array[: len(self._row)]
+
+
 @dataclass
 class RobotMap:
     """One robot's own map: fused landmarks by id, the voxels its cameras have seen through, and the
@@ -247,8 +266,16 @@ class RobotMap:
     looked_voxels: set[int] = field(default_factory=set)
     # dense stereo depth (maptidal.perception.dense): one point per coverage_voxel_m cell, the latest
     surface: dict[int, np.ndarray] = field(default_factory=dict)
-    # points() stacked once per change of the map: discovery and exploration ask for it several times a frame
-    _stacked: np.ndarray | None = field(default=None, repr=False, compare=False)
+    # the same points as rows of two growing arrays, in the dicts' order (a key keeps its first row), so
+    # that points() is two slices joined rather than tens of thousands of small arrays stacked each frame
+    _tables: dict[str, _PointTable] = field(default_factory=dict, init=False, repr=False, compare=False)
+    _stacked: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        self._tables = {"landmarks": _PointTable(), "surface": _PointTable()}
+        for name in ("landmarks", "surface"):
+            for key, point in getattr(self, name).items():
+                self._tables[name].put(key, point)
 
     def add_keyframe(
         self,
@@ -270,9 +297,11 @@ class RobotMap:
         self._carve(camera, seen_points[finite])
         on_teammate = near_teammates(seen_points, teammates, self.params)
         self._stacked = None
+        table = self._tables["landmarks"]
         for landmark, point, skip in zip(seen_ids.tolist(), seen_points, on_teammate.tolist(), strict=True):
             if np.all(np.isfinite(point)) and not skip:
                 self.landmarks[landmark] = point.copy()
+                table.put(landmark, point)
 
     def add_surface(
         self, camera_position: np.ndarray, points: np.ndarray, teammates: np.ndarray | None = None
@@ -290,8 +319,10 @@ class RobotMap:
         points = points[~near_teammates(points, teammates, self.params)]
         keys = _packed(voxel_keys(points, self.params.coverage_voxel_m)).tolist()
         self._stacked = None
+        table = self._tables["surface"]
         for key, point in zip(keys, points, strict=True):
             self.surface[key] = point
+            table.put(key, point)
 
     def _carve(self, camera: np.ndarray, targets: np.ndarray) -> None:
         if len(targets) == 0:
@@ -387,8 +418,7 @@ class RobotMap:
     def points(self) -> np.ndarray:
         """Every landmark's position and every dense surface point ``(N, 3)``: the map's surface."""
         if self._stacked is None:
-            rows = list(self.landmarks.values()) + list(self.surface.values())
-            self._stacked = np.stack(rows) if rows else np.zeros((0, 3))
+            self._stacked = np.concatenate([self._tables["landmarks"].rows(), self._tables["surface"].rows()])
             self._stacked.flags.writeable = False  # shared by every caller until the map changes
         return self._stacked
 

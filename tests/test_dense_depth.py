@@ -179,3 +179,19 @@ def test_the_maps_points_follow_every_change():
     assert len(robot_map.points()) == 2
     robot_map.add_keyframe(camera, np.array([7]), np.array([[2.0, 0.1, 1.0]]))  # landmark 7 moves
     assert np.allclose(robot_map.points()[0], [2.0, 0.1, 1.0])
+
+
+def test_the_maps_points_are_its_dicts_values_in_order_however_many():
+    """points() lists the landmarks then the dense points, each in its dict's order (a key keeps its
+    first place), past the tables' first growth, and for a map built with points already in it."""
+    rng = np.random.default_rng(5)
+    robot_map = RobotMap(MapAwareParams())
+    camera = np.array([0.0, 0.0, 1.0])
+    for _ in range(3):
+        ids = rng.choice(400, 300, replace=False)
+        robot_map.add_keyframe(camera, ids, rng.uniform(1.0, 2.0, (300, 3)))
+        robot_map.add_surface(camera, rng.uniform(1.0, 3.0, (500, 3)))
+    expected = np.stack(list(robot_map.landmarks.values()) + list(robot_map.surface.values()))
+    assert len(expected) > 600 and np.array_equal(robot_map.points(), expected)
+    given = RobotMap(MapAwareParams(), landmarks={3: np.array([1.0, 2.0, 3.0])})
+    assert np.array_equal(given.points(), [[1.0, 2.0, 3.0]])

@@ -832,8 +832,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/map_discovery.py",
-                "        self._stacked = None\n        for key, point in zip(keys",
-                "        for key, point in zip(keys",
+                '        self._stacked = None\n        table = self._tables["surface"]',
+                '        table = self._tables["surface"]',
             )
         ],
     ),
@@ -842,8 +842,18 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/map_discovery.py",
-                "        self._stacked = None\n        for landmark, point, skip",
-                "        for landmark, point, skip",
+                '        self._stacked = None\n        table = self._tables["landmarks"]',
+                '        table = self._tables["landmarks"]',
+            )
+        ],
+    ),
+    "D10": (
+        "a known key given a new row in the map's point table",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "row = self._row.setdefault(key, len(self._row))",
+                "row = self._row[key] = len(self._row)",
             )
         ],
     ),
