@@ -808,8 +808,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/map_discovery.py",
-                "rows = list(self.landmarks.values()) + list(self.surface.values())",
-                "rows = list(self.landmarks.values())",
+                'np.concatenate([self._tables["landmarks"].rows(), self._tables["surface"].rows()])',
+                'np.concatenate([self._tables["landmarks"].rows()])',
             )
         ],
     ),
