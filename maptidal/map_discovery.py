@@ -49,6 +49,7 @@ beside them, not fitted to a tank. Pure numpy and scipy: it runs on a real robot
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import cv2
@@ -61,6 +62,7 @@ from maptidal.geometry import frustum_masks
 __all__ = [
     "MapAwareParams",
     "MapAwareResult",
+    "PointTable",
     "RobotMap",
     "discover_on_map",
     "fit_planes",
@@ -229,15 +231,20 @@ def near_teammates(points: np.ndarray, teammates: np.ndarray | None, params: Map
     return near
 
 
-class _PointTable:
-    """Points by key as the rows of a growing array: a new key takes the next row, a known key keeps its
-    row (as a dict keeps a key's first place), so the rows are in the order a dict's values would be."""
+class PointTable(Mapping[int, np.ndarray]):
+    """Points by integer key, kept as the rows of one growing array: a new key takes the next row, a
+    known key keeps its row (as a dict keeps a key's first place), so :meth:`rows` lists the points in
+    the order a dict's values would, and reads them as one slice rather than thousands of small arrays.
+    Read-only as a mapping; :meth:`put` adds or moves a point."""
 
-    def __init__(self) -> None:
+    def __init__(self, points: Mapping[int, np.ndarray] | None = None) -> None:
         self._row: dict[int, int] = {}
         self._array = np.zeros((256, 3))
+        for key, point in (points or {}).items():
+            self.put(key, point)
 
     def put(self, key: int, point: np.ndarray) -> None:
+        """Set ``key``'s point (a copy is kept)."""
         row = self._row.setdefault(key, len(self._row))
         if row == len(self._array):
             self._array = np.concatenate([self._array, np.zeros_like(self._array)])
@@ -246,6 +253,15 @@ class _PointTable:
     def rows(self) -> np.ndarray:
         """The points ``(N, 3)``, a view valid until the next :meth:`put`."""
         return self._array[: len(self._row)]
+
+    def __getitem__(self, key: int) -> np.ndarray:
+        return self._array[self._row[key]].copy()
+
+    def __iter__(self):
+        return iter(self._row)
+
+    def __len__(self) -> int:
+        return len(self._row)
 
 
 @dataclass
@@ -261,21 +277,17 @@ class RobotMap:
     uses it, :mod:`maptidal.exploration`)."""
 
     params: MapAwareParams = field(default_factory=MapAwareParams)
-    landmarks: dict[int, np.ndarray] = field(default_factory=dict)
+    landmarks: PointTable = field(default_factory=PointTable)
     free_voxels: set[int] = field(default_factory=set)
     looked_voxels: set[int] = field(default_factory=set)
     # dense stereo depth (maptidal.perception.dense): one point per coverage_voxel_m cell, the latest
-    surface: dict[int, np.ndarray] = field(default_factory=dict)
-    # the same points as rows of two growing arrays, in the dicts' order (a key keeps its first row), so
-    # that points() is two slices joined rather than tens of thousands of small arrays stacked each frame
-    _tables: dict[str, _PointTable] = field(default_factory=dict, init=False, repr=False, compare=False)
+    surface: PointTable = field(default_factory=PointTable)
+    # points() joined once per change of the map: discovery and exploration ask for it several times a frame
     _stacked: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        self._tables = {"landmarks": _PointTable(), "surface": _PointTable()}
-        for name in ("landmarks", "surface"):
-            for key, point in getattr(self, name).items():
-                self._tables[name].put(key, point)
+        # points given as plain mappings are kept as tables
+        self.landmarks, self.surface = PointTable(self.landmarks), PointTable(self.surface)
 
     def add_keyframe(
         self,
@@ -297,11 +309,9 @@ class RobotMap:
         self._carve(camera, seen_points[finite])
         on_teammate = near_teammates(seen_points, teammates, self.params)
         self._stacked = None
-        table = self._tables["landmarks"]
         for landmark, point, skip in zip(seen_ids.tolist(), seen_points, on_teammate.tolist(), strict=True):
             if np.all(np.isfinite(point)) and not skip:
-                self.landmarks[landmark] = point.copy()
-                table.put(landmark, point)
+                self.landmarks.put(landmark, point)
 
     def add_surface(
         self, camera_position: np.ndarray, points: np.ndarray, teammates: np.ndarray | None = None
@@ -319,10 +329,8 @@ class RobotMap:
         points = points[~near_teammates(points, teammates, self.params)]
         keys = _packed(voxel_keys(points, self.params.coverage_voxel_m)).tolist()
         self._stacked = None
-        table = self._tables["surface"]
         for key, point in zip(keys, points, strict=True):
-            self.surface[key] = point
-            table.put(key, point)
+            self.surface.put(key, point)
 
     def _carve(self, camera: np.ndarray, targets: np.ndarray) -> None:
         if len(targets) == 0:
@@ -418,7 +426,7 @@ class RobotMap:
     def points(self) -> np.ndarray:
         """Every landmark's position and every dense surface point ``(N, 3)``: the map's surface."""
         if self._stacked is None:
-            self._stacked = np.concatenate([self._tables["landmarks"].rows(), self._tables["surface"].rows()])
+            self._stacked = np.concatenate([self.landmarks.rows(), self.surface.rows()])
             self._stacked.flags.writeable = False  # shared by every caller until the map changes
         return self._stacked
 

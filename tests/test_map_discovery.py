@@ -261,6 +261,7 @@ def test_the_tank_model_is_never_read():
     assert imported <= {
         "__future__",
         "math",
+        "collections.abc",
         "dataclasses",
         "numpy",
         "scipy.spatial",

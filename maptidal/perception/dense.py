@@ -23,7 +23,7 @@ import numpy as np
 
 from maptidal.perception.stereo import gray_image
 
-__all__ = ["DenseDepthParams", "dense_points"]
+__all__ = ["DenseDepthParams", "dense_points", "disparity_map"]
 
 
 @dataclass(frozen=True)

@@ -20,9 +20,8 @@ import time
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import gymnasium
-import mujoco
 import numpy as np
-from replay import record_periods
+from replay import plain_mj_step, record_periods
 
 import maptidal.envs  # noqa: F401  (registers MapTidal/)
 from maptidal.envs.simulation import step_physics
@@ -63,21 +62,17 @@ def measure(env_id: str, n: int, steps: int, block: int = 20, threads: int | Non
     def run_sync() -> None:
         sync.step(actions)
 
-    lean_recorded = list(recorded)
+    def replaying(targets, queue, step):
+        def run() -> None:
+            for _ in range(batched.periods_per_step):
+                for sim, ctrl in zip(targets, queue.pop(0), strict=True):
+                    sim.data.ctrl[:] = ctrl
+                    step(sim.model, sim.data, substeps)
 
-    def run_bare() -> None:
-        for _ in range(batched.periods_per_step):
-            controls = recorded.pop(0)
-            for sim, ctrl in zip(sims, controls, strict=True):
-                sim.data.ctrl[:] = ctrl
-                mujoco.mj_step(sim.model, sim.data, nstep=substeps)
+        return run
 
-    def run_lean() -> None:
-        for _ in range(batched.periods_per_step):
-            controls = lean_recorded.pop(0)
-            for sim, ctrl in zip(lean_sims, controls, strict=True):
-                sim.data.ctrl[:] = ctrl
-                step_physics(sim.model, sim.data, substeps)
+    run_bare = replaying(sims, recorded, plain_mj_step)
+    run_lean = replaying(lean_sims, list(recorded), step_physics)
 
     sides = {"batched": run_batched, "sync": run_sync, "bare mj_step": run_bare, "lean bare": run_lean}
     for run in sides.values():  # warm-up

@@ -14,9 +14,8 @@ import time
 os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is imported: it picks its GL backend then
 
 import gymnasium
-import mujoco
 import numpy as np
-from replay import record_periods
+from replay import plain_mj_step, record_periods
 
 import maptidal.envs  # noqa: F401
 from maptidal.envs.simulation import step_physics
@@ -118,13 +117,14 @@ def interleaved_physics_ratio(
     substeps = bare_sim.scenario.substeps
     periods = recorder.unwrapped.substeps
 
-    def plain(ctrl, userdata):
-        bare_sim.data.ctrl[:], bare_sim.data.userdata[:] = ctrl, userdata
-        mujoco.mj_step(bare_sim.model, bare_sim.data, nstep=substeps)
+    def replaying(target, step):
+        def side(ctrl, userdata):
+            target.data.ctrl[:], target.data.userdata[:] = ctrl, userdata
+            step(target.model, target.data, substeps)
 
-    def lean(ctrl, userdata):
-        lean_sim.data.ctrl[:], lean_sim.data.userdata[:] = ctrl, userdata
-        step_physics(lean_sim.model, lean_sim.data, substeps)
+        return side
+
+    plain, lean = replaying(bare_sim, plain_mj_step), replaying(lean_sim, step_physics)
 
     for action in actions[:10]:  # warm-up, every side
         measured.step(action)

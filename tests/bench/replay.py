@@ -3,6 +3,7 @@ way to give bare MuJoCo the very physics an environment flies."""
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 
 
@@ -23,3 +24,9 @@ def record_periods(sim) -> list[tuple[np.ndarray, np.ndarray]]:
 
     sim.step_periods = one_period_at_a_time
     return record
+
+
+def plain_mj_step(model, data, n_steps: int) -> None:
+    """``n_steps`` of bare ``mj_step``, the sensors computed in every one: the benches' plain bare side,
+    beside ``maptidal.envs.simulation.step_physics`` (the sensors only where they are read)."""
+    mujoco.mj_step(model, data, nstep=n_steps)

@@ -808,8 +808,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/map_discovery.py",
-                'np.concatenate([self._tables["landmarks"].rows(), self._tables["surface"].rows()])',
-                'np.concatenate([self._tables["landmarks"].rows()])',
+                "np.concatenate([self.landmarks.rows(), self.surface.rows()])",
+                "np.concatenate([self.landmarks.rows()])",
             )
         ],
     ),
@@ -832,8 +832,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/map_discovery.py",
-                '        self._stacked = None\n        table = self._tables["surface"]',
-                '        table = self._tables["surface"]',
+                "        self._stacked = None\n        for key, point in zip(keys",
+                "        for key, point in zip(keys",
             )
         ],
     ),
@@ -842,8 +842,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/map_discovery.py",
-                '        self._stacked = None\n        table = self._tables["landmarks"]',
-                '        table = self._tables["landmarks"]',
+                "        self._stacked = None\n        for landmark, point, skip",
+                "        for landmark, point, skip",
             )
         ],
     ),
