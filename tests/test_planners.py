@@ -2,7 +2,8 @@
 ``boustrophedon`` give every robot the baseline's viewpoints from the tank model at the start, as a
 mission plan, and the same robots, controllers, channel and CBBA fly them; discovery stays out. The
 viewpoints are checked against the baselines' own functions and a hand-written reach band, not against
-the mission's filter."""
+the mission's filter: a viewpoint above or below the band is flown at the band's edge, as a pilot flies
+the plan."""
 
 from __future__ import annotations
 
@@ -16,12 +17,21 @@ from maptidal.cli import main
 from maptidal.evaluation.baselines import boustrophedon_viewpoints, voronoi_viewpoints
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import read_events
-from maptidal.mission.run import Mission, MissionParams, plan_tasks
+from maptidal.mission.run import Mission, MissionParams, into_reach, plan_tasks
 from maptidal.tank import TankModel
 
 # a robot keeps 0.35 m from the floor and the surface (the mission's reach margin), and the OSB tank
 # is 2.0 m deep: a viewpoint outside this band of heights is out of reach
 REACH_BAND_M = (0.35, 2.0 - 0.35)
+
+
+def flown_plan(rows: np.ndarray) -> tuple[np.ndarray, int]:
+    """The baseline's rows with their heights held to the reach band by hand (the baselines look level
+    at the walls, so a height moved keeps the distance to the wall), and how many were moved."""
+    low, high = REACH_BAND_M
+    flown = rows.copy()
+    flown[:, 2] = np.clip(rows[:, 2], low, high)
+    return flown, int(((rows[:, 2] < low) | (rows[:, 2] > high)).sum())
 
 
 @pytest.fixture(scope="module")
@@ -39,11 +49,16 @@ def voronoi_mission(tmp_path_factory):
 def test_every_robot_starts_with_the_baselines_reachable_viewpoints(voronoi_mission):
     scenario, document, out = voronoi_mission
     rows = voronoi_viewpoints(scenario.tank)
-    low, high = REACH_BAND_M
-    reachable = rows[(rows[:, 2] >= low) & (rows[:, 2] <= high)]
+    reachable, moved = flown_plan(rows)
     tasks = document["tasks"]
     assert document["planner"] == "voronoi"
-    assert document["plan"] == {"viewpoints": len(rows), "unreachable": len(rows) - len(reachable)}
+    assert moved > 0  # the OSB tank's Voronoi layout has viewpoints above and below the band
+    assert document["plan"] == {
+        "viewpoints": len(rows),
+        "moved_into_reach": moved,
+        "merged": 0,
+        "unreachable": 0,
+    }
     assert len(tasks) == len(reachable) > 0
     for task in tasks:
         assert task["found_by"] == "plan" and task["found_at_s"] == 0.0
@@ -66,18 +81,49 @@ def test_a_baseline_mission_discovers_nothing_and_flies_its_plan(voronoi_mission
     assert "| planner | voronoi |" in (out / "report.md").read_text()
 
 
-def test_the_boustrophedon_plan_is_the_baselines_lanes_within_reach():
+def test_the_boustrophedon_plan_is_the_baselines_lanes_held_within_reach():
     scenario, _ = load_mission(None)
     tasks, summary = plan_tasks("boustrophedon", scenario.tank, MissionParams().discovery.standoff)
     rows = boustrophedon_viewpoints(scenario.tank)
-    low, high = REACH_BAND_M
-    within = int(((rows[:, 2] >= low) & (rows[:, 2] <= high)).sum())
-    assert len(tasks) == within > 0 and summary == {
-        "viewpoints": len(rows),
-        "unreachable": len(rows) - within,
-    }
+    flown, moved = flown_plan(rows)
+    # the paper's top and bottom lanes lie 8 cm from the surface and the floor: both are moved
+    assert moved == 2 * len(rows) // 3
+    assert summary == {"viewpoints": len(rows), "moved_into_reach": moved, "merged": 0, "unreachable": 0}
+    assert len(tasks) == len(rows)
+    for task, row in zip(tasks, flown, strict=True):
+        # a task's pose is quantised (centimetres, and its direction's own step)
+        np.testing.assert_allclose(task.position, row[:3], atol=0.006)
+        np.testing.assert_allclose(task.direction, row[3:], atol=0.01)
     keys = [t.key for t in tasks]
     assert len(set(keys)) == len(keys) and all(k >> 16 == 255 for k in keys)  # the plan's own key space
+
+
+def test_viewpoints_moved_into_reach_merge_and_only_level_ones_move():
+    scenario, _ = load_mission(None)
+    level = [-1.0, 0.0, 0.0]
+    rows = np.array(
+        [
+            [-1.0, 0.2, 0.10, *level],  # below the band: up to 0.35
+            [-1.0, 0.2, 0.20, *level],  # below as well, at the same place: merged into the first
+            [-1.0, 0.2, 1.95, *level],  # above: down to 1.65
+            [-1.0, 0.2, 1.00, *level],  # within: untouched
+            [-1.0, 0.2, 0.10, 0.0, 0.0, -1.0],  # looking down: moving it would change what it sees
+            [-1.0, 0.2, 0.10, 0.0, 1.0, 0.0],  # looking another way: not merged with the first
+        ]
+    )
+    moved_rows, moved, merged = into_reach(scenario.tank, rows)
+    assert (moved, merged) == (4, 1)
+    expected = rows[[0, 2, 3, 4, 5]].copy()
+    expected[[0, 4], 2] = 0.35
+    expected[1, 2] = 1.65
+    np.testing.assert_allclose(moved_rows, expected)
+    # a tank shallower than twice the margin has no band to move into
+    config = scenario.tank.config
+    window = dataclasses.replace(config.window, width=0.0)
+    shallow = TankModel(dataclasses.replace(config, water_depth=0.6, window=window))
+    same, moved, merged = into_reach(shallow, rows)
+    assert (moved, merged) == (0, 0)
+    np.testing.assert_array_equal(same, rows)
 
 
 def test_a_tank_with_no_reachable_viewpoint_is_refused_in_one_line(tmp_path):

@@ -310,22 +310,52 @@ def reachable(tank, rows: np.ndarray, standoff_m: float) -> np.ndarray:
     return keep & inside
 
 
+def into_reach(tank, rows: np.ndarray, merge_m: float = 0.01) -> tuple[np.ndarray, int, int]:
+    """A baseline's viewpoint rows ``(N, 6)`` flown as a pilot would fly its plan: a level-looking
+    viewpoint above or below the band of heights a robot can hold (``REACH_MARGIN_M`` from the floor and
+    the surface) is moved straight up or down to the band's nearest edge, which keeps its distance to the
+    wall it looks at; viewpoints that then lie within ``merge_m`` of an earlier one looking the same way
+    are merged into it. The rows, how many were moved and how many merged. A tank shallower than twice the
+    margin has no band: nothing is moved."""
+    low, high = REACH_MARGIN_M, tank.height - REACH_MARGIN_M
+    rows = np.array(rows, dtype=float).reshape(-1, 6)
+    if len(rows) == 0 or low > high:
+        return rows, 0, 0
+    level = np.abs(rows[:, 5]) < 1e-6  # the baselines look level at vertical walls
+    outside = level & ((rows[:, 2] < low) | (rows[:, 2] > high))
+    rows[outside, 2] = np.clip(rows[outside, 2], low, high)
+    kept: list[int] = []
+    for k in range(len(rows)):
+        duplicate = any(
+            np.linalg.norm(rows[k, :3] - rows[j, :3]) < merge_m and rows[k, 3:] @ rows[j, 3:] > 0.999
+            for j in kept
+        )
+        if not duplicate:
+            kept.append(k)
+    return rows[kept], int(outside.sum()), len(rows) - len(kept)
+
+
 def plan_tasks(planner: str, tank, standoff_m: float) -> tuple[list[Task], dict]:
     """A baseline's viewpoints from the tank model, as the tasks every robot knows from the start, and
-    the plan's summary (viewpoints, and those out of reach, which are left out, as discovery leaves out
-    its own: :func:`reachable`). ValueError when the tank leaves the baseline no reachable viewpoint."""
+    the plan's summary. Viewpoints above or below the heights a robot can hold are moved into them
+    (:func:`into_reach`; the paper's boustrophedon puts its top and bottom lanes 8 cm from the surface
+    and the floor); those still out of reach are left out, as discovery leaves out its own
+    (:func:`reachable`). ValueError when the tank leaves the baseline no reachable viewpoint."""
     try:
         rows = PLANNER_VIEWPOINTS[planner](tank)
     except ValueError as error:
         raise ValueError(f"the {planner} baseline cannot plan this tank: {error}") from None
+    viewpoints = len(rows)
+    rows, moved, merged = into_reach(tank, rows)
     ok = reachable(tank, rows, standoff_m)
     tasks = [Task.create(task_key(PLAN_ORIGIN, k), row[:3], row[3:]) for k, row in enumerate(rows) if ok[k]]
     if not tasks:
         raise ValueError(
-            f"the {planner} baseline has no viewpoint the robots can reach in this tank: all {len(rows)} lie "
-            f"within {REACH_MARGIN_M:g} m of a wall, the floor or the surface, or behind a wall"
+            f"the {planner} baseline has no viewpoint the robots can reach in this tank: all {viewpoints} "
+            f"lie within {REACH_MARGIN_M:g} m of a wall, the floor or the surface, or behind a wall"
         )
-    return tasks, {"viewpoints": len(rows), "unreachable": int((~ok).sum())}
+    summary = {"viewpoints": viewpoints, "moved_into_reach": moved, "merged": merged}
+    return tasks, {**summary, "unreachable": int((~ok).sum())}
 
 
 def check_rates(params: MissionParams, control_period_s: float) -> None:

@@ -39,6 +39,7 @@ SIGNAL_TESTS = ["tests/test_signals.py"]
 BATCHED_TESTS = ["tests/test_batched.py"]
 NATIVE_TESTS = ["tests/test_native_flight.py"]
 DENSE_TESTS = ["tests/test_dense_depth.py", "tests/test_map_discovery.py", "tests/test_loop_discovery.py"]
+PLANNER_TESTS = ["tests/test_planners.py"]
 TESTS_OF_GROUP = {
     "M": TESTS,
     "F": FLIGHT_TESTS,
@@ -50,6 +51,7 @@ TESTS_OF_GROUP = {
     "B": BATCHED_TESTS,
     "N": NATIVE_TESTS,
     "D": DENSE_TESTS,
+    "P": PLANNER_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -881,6 +883,44 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "  m->opt.disableflags = mjDSBL_SENSOR;",
             )
         ],
+    ),
+    "P1": (
+        "a baseline's viewpoints out of the reach band left out, not moved into it",
+        [
+            (
+                "maptidal/mission/run.py",
+                "    rows[outside, 2] = np.clip(rows[outside, 2], low, high)\n",
+                "",
+            )
+        ],
+    ),
+    "P2": (
+        "a viewpoint below the band moved to its top edge",
+        [
+            (
+                "maptidal/mission/run.py",
+                "np.clip(rows[outside, 2], low, high)",
+                "np.where(rows[outside, 2] < low, high, low)",
+            )
+        ],
+    ),
+    "P3": (
+        "viewpoints looking down moved as well",
+        [
+            (
+                "maptidal/mission/run.py",
+                "    level = np.abs(rows[:, 5]) < 1e-6",
+                "    level = np.abs(rows[:, 5]) < 2.0",
+            )
+        ],
+    ),
+    "P4": (
+        "coinciding viewpoints merged whichever way they look",
+        [("maptidal/mission/run.py", " and rows[k, 3:] @ rows[j, 3:] > 0.999", "")],
+    ),
+    "P5": (
+        "no merging of coinciding viewpoints",
+        [("maptidal/mission/run.py", "        if not duplicate:\n", "        if True:\n")],
     ),
 }
 
