@@ -12,7 +12,10 @@ it) and adds five rules, each with its reason:
    the keyframe's dense stereo depth (:meth:`RobotMap.add_surface`): a bare wall gives the front end's
    keypoints few landmarks, and the dense depth maps it all the same. Discovery reads that map, not
    one keyframe's faces alone: one keyframe sees a strip of wall; the map holds the wall. A teammate is
-   no structure: landmarks and faces about where its last acoustic message put it are left out.
+   no structure: landmarks and faces about where its last acoustic message put it are left out. Nor is
+   the water surface, which the dense depth maps from below: dense points within ``SURFACE_BAND_M``
+   (15 cm, the stereo depth error at the 3 m the dense depth reaches) of the depth sensor's datum
+   ``surface_z`` are left out.
 2. **Normals from local surface fits.** A face's normal is the smallest principal axis of the map points
    within ``support_radius_m`` of its centroid (the least-squares plane, as in Hoppe et al. 1992,
    "Surface reconstruction from unorganized points"), turned to face the camera that saw the face. One
@@ -24,7 +27,10 @@ it) and adds five rules, each with its reason:
    the crease between a wall and the floor does not. And the face itself must lie on that plane: each
    vertex and the centroid within ``plane_tolerance_m`` of it. A face spanning a wall and the floor, or a
    near wall and a far one, has its centroid in open water, off every plane.
-4. **Free space from the robot's own map.** A viewpoint is kept only where the robot has seen water:
+4. **A view the team can fly, in water the robot has seen.** A view steeper than ``max_view_pitch_deg``
+   (up or down from level; the mission sets its robots' largest pitch for a view plus the tolerance a
+   view is judged by) is dropped: a robot declines a view it cannot pitch to, so such a task would only
+   cost the team a round of the auction. A viewpoint is kept only where the robot has seen water:
    its voxel lies between one of its cameras and the keyframe mesh that camera saw (space carving:
    :meth:`RobotMap.carve_view` draws the mesh into a depth image; nothing behind a wall or under the
    floor is ever carved), and so is the voxel ``clearance_m`` beneath it (the floor, seen at a grazing
@@ -41,6 +47,12 @@ it) and adds five rules, each with its reason:
    The 0.3 mirrors the paper's confirmation threshold: there a view that holds 75 % of a keyframe's
    keypoints stands for it; here a view that adds under 30 % of its footprint is all but a repeat.
    Occlusion is not modelled in this count.
+
+Candidates come from the keyframe mesh's faces and, with ``dense_candidates_m`` above 0 (off by
+default), from the keyframe's dense depth as well, one per cell of that size, each taken as a face shrunk
+to its point: a bare stretch of wall gives the keypoint mesh no face, so no candidate, however well the
+dense depth maps it. It leaves less of the walls uninspected for more than twice the tasks (README,
+"Closed-loop mission"), so it is a choice, not the default.
 
 Every number is a parameter of :class:`MapAwareParams`; the defaults are chosen by the reasoning given
 beside them, not fitted to a tank. Pure numpy and scipy: it runs on a real robot's landmarks as well.
@@ -122,6 +134,15 @@ class MapAwareParams:
     # fold each keyframe's dense stereo depth into the map (maptidal.perception.dense; the OAK-D computes
     # it on the camera), so that bare walls, with few keypoints, are mapped too
     dense_depth: bool = True
+    # candidates from the keyframe's dense depth as well as from its mesh's faces: one per cell of this
+    # size (0: none). A bare stretch of wall gives the keypoint mesh no face, and so no candidate, however
+    # well the dense depth maps it; a quarter of the camera's footprint height at the 1 m standoff
+    # (2 x 1 m x tan(27 deg) = 1.0 m) gives the greedy cover (rule 5) views to choose from at that grain
+    dense_candidates_m: float = 0.0
+    # the steepest view the team can fly, in degrees up or down from level (None: not checked): the
+    # mission sets its robots' largest pitch for a view plus the direction tolerance a view is judged
+    # by, since a robot declines a view it cannot pitch to (maptidal.mission.verification.pitch_to_fly)
+    max_view_pitch_deg: float | None = None
 
     def __post_init__(self) -> None:
         for name in (
@@ -143,6 +164,7 @@ class MapAwareParams:
             "teammate_radius_m",
             "teammate_speed_m_s",
             "teammate_max_radius_m",
+            "dense_candidates_m",
         ):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
@@ -153,6 +175,13 @@ class MapAwareParams:
             raise ValueError("map-aware min_support must be at least 3 and min_new_points at least 1")
         if self.surface_z is not None and not math.isfinite(self.surface_z):
             raise ValueError(f"map-aware surface_z must be finite or None, got {self.surface_z!r}")
+        if self.max_view_pitch_deg is not None and not 0.0 <= self.max_view_pitch_deg <= 90.0:
+            raise ValueError(
+                f"map-aware max_view_pitch_deg must be in [0, 90] or None, got {self.max_view_pitch_deg!r}"
+            )
+
+
+SURFACE_BAND_M = 0.15
 
 
 def voxel_keys(points: np.ndarray, size: float) -> np.ndarray:
@@ -327,6 +356,9 @@ class RobotMap:
         points = points[np.isfinite(points).all(axis=1)]
         self._carve(camera, points)
         points = points[~near_teammates(points, teammates, self.params)]
+        if self.params.surface_z is not None:
+            # the water surface, seen from below, is no structure (its depth error: look_range_m's 15 cm)
+            points = points[points[:, 2] < self.params.surface_z - SURFACE_BAND_M]
         keys = _packed(voxel_keys(points, self.params.coverage_voxel_m)).tolist()
         self._stacked = None
         for key, point in zip(keys, points, strict=True):
@@ -447,6 +479,7 @@ class MapAwareResult:
     bridging: int
     not_free: int
     redundant: int
+    too_steep: int = 0
 
     def counts(self) -> dict[str, int]:
         """The candidate counts by rule, for logs and reports."""
@@ -455,6 +488,7 @@ class MapAwareResult:
             "no_support": self.no_support,
             "not_planar": self.not_planar,
             "bridging": self.bridging,
+            "too_steep": self.too_steep,
             "not_free": self.not_free,
             "redundant": self.redundant,
             "final": len(self.final),
@@ -511,9 +545,12 @@ def discover_on_map(
     existing: np.ndarray | None = None,
     discovery: DiscoveryParams | None = None,
     teammates: np.ndarray | None = None,
+    surface_points: np.ndarray | None = None,
 ) -> MapAwareResult:
     """Map-aware discovery (module docstring) on a keyframe mesh ``vertices`` ``(V, 3)``, ``faces``
     ``(F, 3)``, seen from ``camera_position``, with the ``existing`` task rows ``(N, 6)`` the robot knows.
+    ``surface_points`` ``(M, 3)``, the keyframe's dense depth, give candidates too, one per
+    ``dense_candidates_m`` cell, each taken as a face shrunk to the point.
     ``robot_map`` must already hold this keyframe (:meth:`RobotMap.add_keyframe`). The candidate standoff
     and the view's frustum are ``discovery``'s (the paper's ``L_i`` and the OAK-D's field of view). Faces
     on a teammate (``teammates``, :func:`near_teammates`) count as having no support."""
@@ -523,9 +560,18 @@ def discover_on_map(
     vertices = np.asarray(vertices, float).reshape(-1, 3)
     faces = np.asarray(faces, int).reshape(-1, 3)
     empty = MapAwareResult(np.zeros((0, 6)), 0, 0, 0, 0, 0, 0)
-    if len(faces) == 0:
+    if len(faces) == 0 and (surface_points is None or len(surface_points) == 0):
         return empty
     triangles = vertices[faces]
+    if surface_points is not None and params.dense_candidates_m > 0:
+        spots = np.asarray(surface_points, float).reshape(-1, 3)
+        spots = spots[np.isfinite(spots).all(axis=1)]
+        if len(spots):
+            _, first = np.unique(voxel_keys(spots, params.dense_candidates_m), axis=0, return_index=True)
+            spots = spots[np.sort(first)]
+            if params.surface_z is not None:
+                spots = spots[spots[:, 2] < params.surface_z - SURFACE_BAND_M]
+            triangles = np.concatenate([triangles, np.repeat(spots[:, None, :], 3, axis=1)])
     good = np.isfinite(triangles).all(axis=(1, 2))
     triangles = triangles[good]
     centres = triangles.mean(axis=1)
@@ -555,7 +601,13 @@ def discover_on_map(
     surface = centres - np.einsum("ij,ij->i", centres - fit_centre, normal)[:, None] * normal
     kept = np.flatnonzero(on_plane)
     rows = np.hstack([surface[kept] + discovery.standoff * normal[kept], -normal[kept]])
-    # rule 4: in water the robot has seen
+    # rule 4: a view the team can fly ...
+    too_steep = 0
+    if params.max_view_pitch_deg is not None:
+        flyable = np.abs(rows[:, 5]) <= math.sin(math.radians(params.max_view_pitch_deg)) + 1e-12
+        too_steep = int((~flyable).sum())
+        rows = rows[flyable]
+    # ... in water the robot has seen
     free = reachable_on_map(robot_map, rows, discovery.standoff, tree)
     rows = rows[free]
     # rule 5: a greedy cover of the map's cells, the known tasks' views counting as covered
@@ -587,4 +639,5 @@ def discover_on_map(
         bridging=int((planar & ~on_plane).sum()),
         not_free=int((~free).sum()),
         redundant=redundant_before - len(final),
+        too_steep=too_steep,
     )

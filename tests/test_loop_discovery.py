@@ -225,11 +225,23 @@ def test_each_keyframes_dense_depth_maps_the_walls_where_they_are(tmp_path, dens
         seed=2,
         perception_process=False,
         plots=False,
-        map_aware=dataclasses.replace(MissionParams().map_aware, dense_depth=dense),
+        map_aware=dataclasses.replace(
+            MissionParams().map_aware, dense_depth=dense, dense_candidates_m=0.25 if dense else 0.0
+        ),
     )
     mission = Mission(scenario, params, tmp_path)
     mission.run()
     maps = mission.perception.maps
+    # the maps know the surface's datum and the steepest view the Heavies fly: their pitch for a view
+    # and the tolerance a view is judged by
+    for robot_map in maps.values():
+        assert robot_map.params.surface_z == scenario.tank.height
+        assert robot_map.params.max_view_pitch_deg == params.max_pitch_deg + params.direction_tolerance_deg
+    # with dense candidates a keyframe has more candidates than its mesh has faces; without, as many
+    keyframes = [e for e in read_events(tmp_path) if e["kind"] == "keyframe" and "rules" in e]
+    assert keyframes
+    extra = [e["rules"]["candidates"] - e["faces"] for e in keyframes]
+    assert (max(extra) > 0) if dense else (max(extra) == 0)
     surface = [robot_map.surface for robot_map in maps.values()]
     if not dense:
         assert all(len(points) == 0 for points in surface)
@@ -251,16 +263,26 @@ def test_each_keyframes_dense_depth_maps_the_walls_where_they_are(tmp_path, dens
     assert np.median(distance) < 0.03 and np.percentile(distance, 80) < 0.1
 
 
-def test_dense_depth_in_a_mission_file_must_be_true_or_false(tmp_path, capsys):
+def test_the_maps_settings_in_a_mission_file_are_checked(tmp_path, capsys):
     from maptidal.mission.config import load_mission
     from maptidal.paths import asset
 
     base = asset("scenarios", "mission.toml").read_text()
     path = tmp_path / "mission.toml"
-    path.write_text(base + '\n[mission]\ndense_depth = "yes"\nduration_s = 5\n')
-    status = main(["run", "--scenario", str(path), "--out", str(tmp_path / "out")])
-    err = capsys.readouterr().err.strip().splitlines()
-    assert status == 2 and len(err) == 1 and "dense_depth must be true or false" in err[0]
+
+    def refused(setting: str) -> str:
+        # `maptidal run` on the mission file with ``setting``: its one line of error (status 2)
+        path.write_text(base + f"\n[mission]\n{setting}\nduration_s = 5\n")
+        status = main(["run", "--scenario", str(path), "--out", str(tmp_path / "out")])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert status == 2 and len(err) == 1
+        return err[0]
+
+    assert "dense_depth must be true or false" in refused('dense_depth = "yes"')
+    assert "dense_candidates_m" in refused("dense_candidates_m = -0.25")
     path.write_text(base + "\n[mission]\ndense_depth = false\n")
     _, settings = load_mission(path)
     assert settings["map_aware"].dense_depth is False
+    path.write_text(base + "\n[mission]\ndense_candidates_m = 0.25\n")
+    _, settings = load_mission(path)
+    assert settings["map_aware"].dense_candidates_m == 0.25 and settings["map_aware"].dense_depth is True

@@ -392,3 +392,88 @@ def test_the_water_in_view_before_the_mesh_is_carved_and_none_beyond_it():
     assert free[surely_free & ~margin].all()
     assert not free[surely_not].any()
     assert free[surely_free].mean() > 0.8
+
+
+# ----- views the team can fly; candidates from the dense depth; the water surface ----------------------
+
+
+def test_a_view_steeper_than_the_team_can_pitch_is_dropped_and_counted():
+    # faces on the floor give views looking straight down; faces on the wall give level ones
+    rng = np.random.default_rng(11)
+    points, ids, camera = _wall_scene(rng)
+    faces_at = [_face_at(points, centre) for centre in ([3.0, 2.0, 1.0], [2.0, 1.0, 0.0])]
+    vertices = np.vstack([points[f] for f in faces_at])
+    triangles = [[0, 1, 2], [3, 4, 5]]
+    free = discover_on_map(_map_of(points, ids, camera), vertices, triangles, camera)
+    # without a limit both are candidates past rule 3, and the floor's view looks down
+    assert free.too_steep == 0
+    pitches = []
+    for limit in (55.0, 85.0):
+        robot_map = _map_of(points, ids, camera, MapAwareParams(max_view_pitch_deg=limit))
+        result = discover_on_map(robot_map, vertices, triangles, camera)
+        pitches.append(result.too_steep)
+        # the rows that are left are no steeper than the limit (the written floor normal is +z: -90 deg)
+        elevation = np.degrees(np.arcsin(np.abs(result.final[:, 5]))) if len(result.final) else np.zeros(0)
+        assert (elevation <= limit + 1e-9).all()
+        assert result.counts()["too_steep"] == result.too_steep
+    assert pitches == [1, 1]  # the floor's view is some 90 deg down: past either limit
+    # a robot that cannot pitch, judged within 10 deg, flies a wall's level view
+    level = _map_of(points, ids, camera, MapAwareParams(max_view_pitch_deg=10.0))
+    kept = discover_on_map(level, vertices[:3], [[0, 1, 2]], camera)
+    assert kept.too_steep == 0 and len(kept.final) == 1
+    with pytest.raises(ValueError, match="max_view_pitch_deg"):
+        MapAwareParams(max_view_pitch_deg=120.0)
+
+
+def test_dense_points_give_candidates_where_the_mesh_has_no_face():
+    # the keypoint mesh has one face, high on the wall at y = 1; the dense depth covers the whole wall
+    rng = np.random.default_rng(12)
+    points, ids, camera = _wall_scene(rng)
+    face = _face_at(points, [3.0, 1.0, 1.5])
+    dense = _plane_points([3, 0, 0], [0, 1, 0], [0, 0, 1], 4.0, 2.0, 0.05, rng)
+    found = {}
+    for size in (0.0, 0.25):
+        robot_map = _map_of(points, ids, camera, MapAwareParams(dense_candidates_m=size))
+        robot_map.add_surface(camera, dense)
+        result = discover_on_map(robot_map, points[face], [[0, 1, 2]], camera, surface_points=dense)
+        found[size] = result
+    assert found[0.0].candidates == 1 and len(found[0.0].final) == 1
+    many = found[0.25]
+    # one candidate per 25 cm cell of the dense points (counted here by hand) and the mesh's face
+    cells = {tuple(np.floor(p / 0.25).astype(int)) for p in dense}
+    assert many.candidates == 1 + len(cells)
+    # the wall's far end (y > 2.5), which the face's view does not reach, is now looked at
+    assert len(many.final) > 1
+    for row in many.final:
+        assert row[3] > 0.95  # at the wall, along +x (a fit near the floor tilts a little)
+        assert abs(row[0] - 2.0) < 0.1  # the 1 m standoff from x = 3
+    assert many.final[:, 1].max() > 2.5
+    # NaN rows among the dense points are skipped, and none at all is the mesh alone
+    robot_map = _map_of(points, ids, camera, MapAwareParams(dense_candidates_m=0.25))
+    with_nan = np.vstack([dense[:5], np.full((2, 3), np.nan)])
+    assert (
+        discover_on_map(robot_map, points[face], [[0, 1, 2]], camera, surface_points=with_nan).candidates <= 6
+    )
+    assert discover_on_map(robot_map, points[face], [[0, 1, 2]], camera, surface_points=None).candidates == 1
+    assert (
+        discover_on_map(
+            robot_map, points[face], [[0, 1, 2]], camera, surface_points=np.zeros((0, 3))
+        ).candidates
+        == 1
+    )
+
+
+def test_the_water_surface_seen_from_below_is_no_structure():
+    # dense depth on the water surface (z = 2.0, the depth sensor's datum) and on a wall below it
+    robot_map = RobotMap(MapAwareParams(surface_z=2.0))
+    camera = np.array([1.0, 2.0, 1.0])
+    xs, ys = np.meshgrid(np.arange(1.2, 2.8, 0.1), np.arange(1.0, 3.0, 0.1))
+    surface = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 1.97)])
+    wall = np.column_stack([np.full(10, 3.0), np.full(10, 2.0), np.linspace(0.5, 1.84, 10)])
+    robot_map.add_surface(camera, np.vstack([surface, wall]))
+    kept = robot_map.points()
+    assert len(kept) == 10 and (kept[:, 2] < 2.0 - 0.15).all()  # the wall's points, none of the surface
+    # without a datum nothing is dropped
+    unknown = RobotMap(MapAwareParams())
+    unknown.add_surface(camera, np.vstack([surface, wall]))
+    assert len(unknown.points()) > 10

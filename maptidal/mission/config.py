@@ -17,6 +17,7 @@
     explore = true         # map-aware robots with no task fly to their map's frontier (false: they do not)
     explore_radius_m = 3.0 # ... within this of where each was launched (maptidal.exploration)
     dense_depth = true     # map-aware robots map each keyframe's dense stereo depth (false: keypoints only)
+    dense_candidates_m = 0.0  # map-aware candidates from the dense depth too, one per cell this size (0: off)
     [[mission.events]]
     time_s = 60
     kind = "fail"          # rov1 stops and falls silent
@@ -73,6 +74,7 @@ MISSION_KEYS = {
     "explore",
     "explore_radius_m",
     "dense_depth",
+    "dense_candidates_m",
 }
 # the [mission] keys that are not plain numbers, and what they must be
 SETTING_TYPES: dict[str, type] = {
@@ -136,8 +138,14 @@ def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
     settings["events"] = tuple(events)
     if "discovery" in settings:  # MissionParams.discovery holds the paper's parameters; this is the mode
         settings["discovery_mode"] = settings.pop("discovery")
-    if "dense_depth" in settings:  # a setting of the robots' maps (MapAwareParams)
-        settings["map_aware"] = MapAwareParams(dense_depth=settings.pop("dense_depth"))
+    map_settings = {
+        key: settings.pop(key) for key in ("dense_depth", "dense_candidates_m") if key in settings
+    }
+    if map_settings:  # settings of the robots' maps (MapAwareParams)
+        try:
+            settings["map_aware"] = MapAwareParams(**map_settings)
+        except ValueError as err:
+            raise ValueError(f"{path}: [mission] {err}") from None
     if "explore_radius_m" in settings:
         try:
             settings["frontier"] = FrontierParams(explore_radius_m=float(settings.pop("explore_radius_m")))

@@ -123,6 +123,7 @@ def perceive(
                 robot_map.carve_view(
                     pose.position, pose.rotation, front.intrinsics, mesh.vertices, mesh.faces
                 )
+                surface = None
                 if robot_map.params.dense_depth:
                     surface = dense_points(
                         job.left, job.right, front.intrinsics, pose.position, pose.rotation
@@ -136,6 +137,7 @@ def perceive(
                     job.existing,
                     discovery,
                     teammates=job.teammates,
+                    surface_points=surface,
                 )
                 new, rules = found.final, found.counts()
         except DiscoveryInputError:

@@ -590,7 +590,12 @@ class Mission:
         if params.discovery_mode == "map-aware" and params.planner == "maptidal":
             # the surface's height is the depth sensor's datum, the one the robots' estimators place
             # their depth with; nothing else of the tank is given
-            map_params = dataclasses.replace(params.map_aware, surface_z=self.scenario.tank.height)
+            # the steepest view any of them can fly: its pitch for a view plus the tolerance a view is
+            # judged by (a robot declines a steeper one)
+            steepest = max(r.max_pitch_deg for r in self.robots.values()) + params.direction_tolerance_deg
+            map_params = dataclasses.replace(
+                params.map_aware, surface_z=self.scenario.tank.height, max_view_pitch_deg=min(steepest, 90.0)
+            )
             maps = {name: RobotMap(map_params) for name in fronts}
         self.perception.configure(fronts, params.discovery, maps)
         # the robots' cameras render on a thread of their own, beside the physics (MuJoCo lets go of

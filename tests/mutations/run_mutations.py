@@ -884,6 +884,44 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             )
         ],
     ),
+    "D11": (
+        "views of any steepness kept",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "flyable = np.abs(rows[:, 5]) <= math.sin(math.radians(params.max_view_pitch_deg)) + 1e-12",
+                "flyable = np.ones(len(rows), bool)",
+            )
+        ],
+    ),
+    "D12": (
+        "the dense points given no candidates",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "    if surface_points is not None and params.dense_candidates_m > 0:",
+                "    if False:",
+            )
+        ],
+    ),
+    "D13": (
+        "the water surface seen from below kept in the map",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "            points = points[points[:, 2] < self.params.surface_z - SURFACE_BAND_M]",
+                "            points = points",
+            )
+        ],
+    ),
+    "D14": (
+        "the loop's discovery without the keyframe's dense points",
+        [("maptidal/mission/perception.py", "surface_points=surface,", "surface_points=None,")],
+    ),
+    "D15": (
+        "the mission's maps without the steepest view its robots fly",
+        [("maptidal/mission/run.py", ", max_view_pitch_deg=min(steepest, 90.0)", "")],
+    ),
     "P1": (
         "a baseline's viewpoints out of the reach band left out, not moved into it",
         [
@@ -954,8 +992,10 @@ def run(ids: list[str]) -> int:
                 text=True,
             )
             failed = [
-                line.split(" ", 1)[1] for line in result.stdout.splitlines() if line.startswith("FAILED ")
-            ]
+                line.split(" ", 1)[1]
+                for line in result.stdout.splitlines()
+                if line.startswith(("FAILED ", "ERROR "))
+            ] or ["an error before any test ran"]
             verdict = f"killed by {failed[0].split(' - ')[0]}" if result.returncode else "SURVIVED"
             if not result.returncode:
                 survived.append(key)
