@@ -78,7 +78,13 @@ def test_a_baseline_mission_discovers_nothing_and_flies_its_plan(voronoi_mission
     kinds = [e["kind"] for e in read_events(out)]
     assert "discovered" not in kinds and "keyframe" not in kinds  # the frames serve localisation only
     assert "flying" in kinds  # the auction gave the plan out and the robots set off
-    assert "| planner | voronoi |" in (out / "report.md").read_text()
+    report = (out / "report.md").read_text()
+    assert "| planner | voronoi |" in report
+    plan = document["plan"]
+    expected = (
+        f"| baseline's plan | {plan['viewpoints']} viewpoints: {plan['moved_into_reach']} moved into reach, "
+    )
+    assert expected in report
 
 
 def test_the_boustrophedon_plan_is_the_baselines_lanes_held_within_reach():

@@ -562,6 +562,14 @@ def timing_lines(document: dict) -> list[str]:
     return lines
 
 
+def plan_line(plan: dict) -> str:
+    """A baseline's plan summary (``mission.json``'s ``plan``) in words."""
+    return (
+        f"{plan.get('viewpoints', 0)} viewpoints: {plan.get('moved_into_reach', 0)} moved into reach, "
+        f"{plan.get('merged', 0)} merged, {plan.get('unreachable', 0)} out of reach"
+    )
+
+
 def summary_table(document: dict) -> str:
     """The one-table summary printed at the end of a mission."""
     m = mission_metrics(document)
@@ -570,6 +578,7 @@ def summary_table(document: dict) -> str:
         ("simulated time", f"{m['completion_time_s']:.1f} s"),
         ("real-time factor", f"{rtf:.1f}x" if rtf else "n/a"),
         *([("planner", document["planner"])] if document.get("planner") else []),
+        *([("baseline's plan", plan_line(document["plan"]))] if document.get("plan") else []),
         ("finished", str(m["finished"])),
         *([("ended", document["ending"])] if document.get("ending") else []),
         ("tasks found / done / verified", f"{m['tasks_found']} / {m['tasks_done']} / {m['tasks_verified']}"),
