@@ -4,6 +4,7 @@ a textured wall drawn by a homography, and the Kalman update written out by hand
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import cv2
@@ -191,12 +192,11 @@ def test_a_fix_beyond_the_innovation_gate_is_refused():
     assert fix is not None and np.linalg.norm(fix.centre - centre) < 0.03
 
 
-def test_a_robot_far_off_is_relocalised_against_the_whole_map():
-    """Believed 1 m from where it is, beyond any search near the prediction: a robot that knows itself
-    lost (0.5 m unsure) is found again by matching against every anchor; one that believes itself
-    surer is not (it would take a wrong fix for a right one)."""
+def _anchored_and_second_view(params: RelocalisationParams):
+    """The wall seen from 1.6 m (its anchors, made by ``fresh_anchors(params)``), and a second view from
+    1.0 m, 20 cm aside and turned 12 deg: (fresh_anchors, second view's centre, rotation, pixels,
+    descriptors, valid)."""
     texture = _texture()
-    params = RelocalisationParams()
     first_centre, first_rotation = np.array([-1.6, 0.0, 1.8]), facing_wall()
     image, pixels, points = _frame(texture, first_centre, first_rotation)
     descriptors, valid = describe(image, pixels, points[:, 2], INTRINSICS, params.support_m)
@@ -205,15 +205,85 @@ def test_a_robot_far_off_is_relocalised_against_the_whole_map():
     second_descriptors, second_valid = describe(
         second[0], second[1], second[2][:, 2], INTRINSICS, params.support_m
     )
+
+    def fresh_anchors(chosen: RelocalisationParams) -> AnchorMap:
+        anchors = AnchorMap(INTRINSICS, chosen)
+        anchors.add(CameraPose(first_centre, first_rotation), pixels, points, descriptors, valid, 0.01)
+        return anchors
+
+    return fresh_anchors, centre, rotation, second[1], second_descriptors, second_valid
+
+
+def test_a_robot_far_off_is_relocalised_against_the_whole_map():
+    """Believed 1 m from where it is, beyond any search near the prediction: a robot that knows itself
+    lost (0.5 m unsure) is found again by matching against every anchor; one that believes itself
+    surer is not (it would take a wrong fix for a right one)."""
+    params = RelocalisationParams()
+    fresh_anchors, centre, rotation, pixels, descriptors, valid = _anchored_and_second_view(params)
     believed = CameraPose(centre + np.array([-0.8, 0.6, 0.0]), rotation)
     for sigma, found in ((0.5, True), (0.2, False)):
-        anchors = AnchorMap(INTRINSICS, params)
-        anchors.add(CameraPose(first_centre, first_rotation), pixels, points, descriptors, valid, 0.01)
-        fix, _ = anchors.relocalise(believed, second[1], second_descriptors, second_valid, sigma_m=sigma)
+        anchors = fresh_anchors(params)
+        fix, _ = anchors.relocalise(believed, pixels, descriptors, valid, sigma_m=sigma)
         assert (fix is not None) == found, (sigma, dict(anchors.refused))
         if found:
             assert anchors.global_fixes == 1 and np.linalg.norm(fix.centre - centre) < 0.03
             assert fix.inliers >= params.global_min_inliers
+
+
+def test_a_robot_lost_farther_than_the_first_search_is_found_by_the_widening_rings():
+    """Believed 2.1 m from where it is (a robot without a DVL pushed while in contact): the first search,
+    out to 1.2 m, misses it; each further search tries one more ring of 0.3 m (a guided match reaches
+    some 0.4 m about its grid point), so a later search finds it (searching one frame in three: the 7th
+    or the 10th frame). A robot that believes itself surer than global_sigma_m does not search and is
+    not found; nor is one whose rings stop at 1.5 m."""
+    params = RelocalisationParams()
+    fresh_anchors, centre, rotation, pixels, descriptors, valid = _anchored_and_second_view(params)
+    believed = CameraPose(centre + np.array([-0.3, 2.1, 0.0]), rotation)
+    for sigma, reach, found_at in ((0.5, 2.4, (7, 10)), (0.25, 2.4, None), (0.5, 1.5, None)):
+        anchors = fresh_anchors(dataclasses.replace(params, max_lost_search_m=reach))
+        frames = []
+        for frame in range(1, 14):
+            fix, _ = anchors.relocalise(believed, pixels, descriptors, valid, sigma_m=sigma)
+            if fix is not None:
+                frames.append(frame)
+                assert np.linalg.norm(fix.centre - centre) < 0.03
+                break
+        if found_at is None:
+            assert not frames, (sigma, reach, frames)
+        else:
+            assert frames and frames[0] in found_at, (sigma, reach, frames, dict(anchors.refused))
+            assert anchors.global_fixes == 1
+
+
+def test_the_searchs_offsets_are_the_whole_grid_then_one_ring_at_a_time():
+    """The offsets each search tries, against the grid written out point by point: first every point of
+    the 0.3 m grid out to 1.2 m but the prediction, then the points at exactly 1.5, 1.8, 2.1 and 2.4 m
+    (the largest coordinate), then the whole grid again."""
+    params = RelocalisationParams()
+    anchors = AnchorMap(INTRINSICS, params)
+    grid = [(i * 0.3, j * 0.3) for i in range(-8, 9) for j in range(-8, 9)]
+
+    def chebyshev(offset) -> float:
+        return round(max(abs(offset[0]), abs(offset[1])), 6)
+
+    expected = [
+        sorted(o for o in grid if 0 < chebyshev(o) <= 1.2 + 1e-9),
+        *[sorted(o for o in grid if abs(chebyshev(o) - r) < 1e-9) for r in (1.5, 1.8, 2.1, 2.4)],
+        sorted(o for o in grid if 0 < chebyshev(o) <= 1.2 + 1e-9),
+    ]
+    for ring, want in enumerate(expected):
+        offsets, bound = anchors._search_offsets()
+        got = sorted((round(dx, 6), round(dy, 6)) for dx, dy in offsets.tolist())
+        assert got == [(round(a, 6), round(b, 6)) for a, b in want]
+        if ring in (0, 5):  # the first search keeps its bound of max_global_correction_m
+            assert bound == params.max_global_correction_m
+        else:  # a ring's fix may lie out to its corners and a step
+            assert bound >= max(math.hypot(*o) for o in want) + params.global_step_m - 1e-9
+    # with no rings beyond the first search, every search is the whole grid
+    anchors = AnchorMap(INTRINSICS, dataclasses.replace(params, max_lost_search_m=1.2))
+    for _ in range(3):
+        offsets, bound = anchors._search_offsets()
+        assert len(offsets) == 80 and bound == params.max_global_correction_m
 
 
 def test_a_view_of_another_wall_gives_no_fix():

@@ -33,7 +33,10 @@ localised for a whole mission, where frame-to-frame odometry drifts without boun
   from predictions moved over a horizontal grid (``global_step_m``, out to
   ``max_global_correction_m``), and the fix with the most inliers, at least ``global_min_inliers``. A
   descriptor match against the whole map instead found 0 to 3 matches a frame in the painted tank (a
-  near twin for nearly every keypoint fails Lowe's test), and a robot 90 cm off stayed so.
+  near twin for nearly every keypoint fails Lowe's test), and a robot 90 cm off stayed so. A robot
+  still lost widens the search one ring of the grid per search, out to ``max_lost_search_m``, then
+  starts over: a robot without a DVL pushed while in contact runs its motion model on while blocked, and
+  ends farther off than the first search reaches, and than its standard deviation says.
 
 OpenCV (SIFT descriptors), numpy and scipy only.
 """
@@ -80,6 +83,12 @@ class RelocalisationParams:
     global_min_inliers: int = 20
     global_step_m: float = 0.3  # the guided search at each point covers some 80 px, 0.4 m at 1 m
     max_global_correction_m: float = 1.2
+    # a robot still lost after that search widens it: each further search tries one more square ring of
+    # global_step_m beyond it, out to this far, then starts over. Not out to three of its standard
+    # deviations: a robot without a DVL pushed while in contact runs its motion model on while blocked,
+    # and its standard deviation does not know it. In the default mission (seed 0, dense candidates)
+    # one ended 1.3 to 2 m off believing itself within 9 cm, and stayed lost for 360 s
+    max_lost_search_m: float = 2.4
     # the search (80 guided matches) runs on one frame in this many: on every frame it slowed a mission
     # whose robot was lost for long from 14x to 5.6x real time
     search_every_frames: int = 3
@@ -112,7 +121,8 @@ class RelocalisationParams:
             and self.global_min_inliers >= self.min_inliers
             and self.global_step_m > 0
             and self.search_every_frames >= 1
-            and self.max_global_correction_m >= self.global_step_m,
+            and self.max_global_correction_m >= self.global_step_m
+            and self.max_lost_search_m >= self.max_global_correction_m,
             "depth band": 0 < self.min_depth_m < self.max_depth_m,
             "spacing_px": self.spacing_px >= 0,
             "max_anchor_sigma_m": self.max_anchor_sigma_m > 0,
@@ -265,6 +275,7 @@ class AnchorMap:
         self.sigmas = np.zeros(0)  # each anchor's position standard deviation: its frame's, when made
         self.fixes = 0
         self._unsure_frames = 0  # frames in a row that have needed the search
+        self._ring = 0  # the search's ring: 0 the whole square out to max_global_correction_m
         self.global_fixes = 0  # of those, found by the search of a lost robot
         self.refused: Counter = Counter()  # frames with matches but no fix, by reason
         self._rng = np.random.default_rng(0)  # a fixed seed: the same frames give the same fixes
@@ -349,37 +360,61 @@ class AnchorMap:
         searching = fix is None and sigma_m >= self.params.global_sigma_m
         self._unsure_frames = self._unsure_frames + 1 if searching else 0
         if searching and (self._unsure_frames - 1) % self.params.search_every_frames == 0:
-            found = self._search(pose, pixels, descriptors, valid)
+            found = self._search(pose, pixels, descriptors, valid, *self._search_offsets())
             if found is not None:
+                self._ring = 0
                 self.fixes += 1
                 self.global_fixes += 1
                 return found
+        elif not searching:
+            self._ring = 0
         self.fixes += fix is not None
         return fix, matched
 
-    def _search(
-        self, pose: CameraPose, pixels: np.ndarray, descriptors: np.ndarray, valid: np.ndarray
-    ) -> tuple[Fix, np.ndarray] | None:
-        """The fix with the most inliers among guided matches from predictions moved over a horizontal
-        grid of ``global_step_m`` out to ``max_global_correction_m`` (a descriptor match against the whole
-        map fails on a tank's repeated texture: Lowe's ratio test finds a near twin for nearly every
-        keypoint), each needing ``global_min_inliers``; None when none has them."""
+    def _search_offsets(self) -> tuple[np.ndarray, float]:
+        """The horizontal offsets ``(K, 2)`` this search tries, and how far its fix may be from the
+        prediction: the whole grid of ``global_step_m`` out to ``max_global_correction_m`` first (a fix
+        within that), then one square ring of the grid beyond it per search, out to
+        ``max_lost_search_m`` (a fix within the ring's corners and a step), then over again."""
         p = self.params
-        steps = np.arange(-p.max_global_correction_m, p.max_global_correction_m + 1e-9, p.global_step_m)
+        rings = math.floor((p.max_lost_search_m - p.max_global_correction_m) / p.global_step_m + 1e-9)
+        ring = self._ring if self._ring <= rings else 0
+        self._ring = ring + 1 if ring < rings else 0
+        inner = p.max_global_correction_m + (ring - 1) * p.global_step_m if ring else -1.0
+        outer = p.max_global_correction_m + ring * p.global_step_m
+        count = math.floor(outer / p.global_step_m + 1e-9)
+        steps = np.arange(-count, count + 1) * p.global_step_m
+        dx, dy = (grid.ravel() for grid in np.meshgrid(steps, steps, indexing="ij"))
+        chebyshev = np.maximum(np.abs(dx), np.abs(dy))
+        keep = (chebyshev > inner + 1e-9) & (chebyshev > 0)  # the prediction itself was tried
+        bound = outer if ring == 0 else math.sqrt(2.0) * outer + p.global_step_m
+        return np.column_stack([dx[keep], dy[keep]]), bound
+
+    def _search(
+        self,
+        pose: CameraPose,
+        pixels: np.ndarray,
+        descriptors: np.ndarray,
+        valid: np.ndarray,
+        offsets: np.ndarray,
+        bound: float,
+    ) -> tuple[Fix, np.ndarray] | None:
+        """The fix with the most inliers among guided matches from predictions moved by each horizontal
+        offset (:meth:`_search_offsets`; a descriptor match against the whole map fails on a tank's
+        repeated texture: Lowe's ratio test finds a near twin for nearly every keypoint), each needing
+        ``global_min_inliers`` and lying within ``bound`` of the prediction; None when none has them."""
+        p = self.params
         best: tuple[Fix, np.ndarray] | None = None
-        for dx in steps:
-            for dy in steps:
-                if dx == 0 and dy == 0:
-                    continue  # the prediction itself was tried
-                moved = CameraPose(pose.position + np.array([dx, dy, 0.0]), pose.rotation)
-                keypoints, anchors = self.match(moved, pixels, descriptors, valid, p.global_step_m)
-                if len(keypoints) < p.global_min_inliers:
-                    continue
-                fix, matched = self._attempt(
-                    pose, pixels, keypoints, anchors, p.global_step_m, p.global_min_inliers, globally=True
-                )
-                if fix is not None and (best is None or fix.inliers > best[0].inliers):
-                    best = (fix, matched)
+        for dx, dy in offsets.tolist():
+            moved = CameraPose(pose.position + np.array([dx, dy, 0.0]), pose.rotation)
+            keypoints, anchors = self.match(moved, pixels, descriptors, valid, p.global_step_m)
+            if len(keypoints) < p.global_min_inliers:
+                continue
+            fix, matched = self._attempt(
+                pose, pixels, keypoints, anchors, p.global_step_m, p.global_min_inliers, bound=bound
+            )
+            if fix is not None and (best is None or fix.inliers > best[0].inliers):
+                best = (fix, matched)
         return best
 
     def _attempt(
@@ -390,10 +425,10 @@ class AnchorMap:
         anchors: np.ndarray,
         sigma_m: float,
         min_inliers: int,
-        globally: bool = False,
+        bound: float | None = None,
     ) -> tuple[Fix | None, np.ndarray]:
-        """One fix from matched ``keypoints`` and ``anchors`` (module docstring's refusals; a global one
-        is bounded by ``max_global_correction_m`` instead of the gate)."""
+        """One fix from matched ``keypoints`` and ``anchors`` (module docstring's refusals; one of the
+        search is bounded by ``bound``, the search's reach, instead of the gate)."""
         p = self.params
         if len(keypoints) < min_inliers:
             return None, keypoints
@@ -410,7 +445,8 @@ class AnchorMap:
             self.refused["geometry"] += 1
             return None, keypoints
         jump = float(np.linalg.norm(centre - pose.position))
-        if jump > (p.max_global_correction_m if globally else p.max_correction_m):
+        globally = bound is not None
+        if jump > (bound if globally else p.max_correction_m):
             self.refused["jump"] += 1
             return None, keypoints
         used = anchors[inliers]

@@ -422,6 +422,26 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         "the drift rate never adapts to surprising fixes",
         [("maptidal/perception/odometry.py", "if normalised > 2.0:", "if False:")],
     ),
+    "L11": (
+        "the lost robot's search never widens past its first square",
+        [
+            (
+                "maptidal/perception/relocalisation.py",
+                "        self._ring = ring + 1 if ring < rings else 0",
+                "        self._ring = 0",
+            )
+        ],
+    ),
+    "L12": (
+        "a ring's fix bounded by the first search's reach",
+        [
+            (
+                "maptidal/perception/relocalisation.py",
+                "bound = outer if ring == 0 else math.sqrt(2.0) * outer + p.global_step_m",
+                "bound = p.max_global_correction_m",
+            )
+        ],
+    ),
     "S1": (
         "a robot's own discoveries leave newest first",
         [
