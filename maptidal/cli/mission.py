@@ -52,7 +52,8 @@ def register(commands) -> None:
         help="where the tasks come from (default: the scenario's, else maptidal): maptidal discovers them "
         "on the robots' own meshes as they fly; voronoi and boustrophedon are the paper's baselines, "
         "whose viewpoints are planned a priori from the tank model and known to every robot from the "
-        "start, flown with the same robots, controllers, channel and CBBA",
+        "start, flown with the same robots, controllers, channel and CBBA (a viewpoint above or below "
+        "the heights a robot can hold is flown at their edge, still level)",
     )
     run.add_argument(
         "--discovery",
