@@ -344,14 +344,16 @@ class RobotMap:
 
     def add_surface(
         self, camera_position: np.ndarray, points: np.ndarray, teammates: np.ndarray | None = None
-    ) -> None:
+    ) -> np.ndarray:
         """Fold in a keyframe's dense stereo depth (:func:`maptidal.perception.dense.dense_points`): carve
         the rays from ``camera_position`` to ``points`` ``(N, 3)`` as for landmarks, and keep one point per
         ``coverage_voxel_m`` cell (the latest), so that a bare wall, which gives the front end few
-        landmarks, is in the map too. Rows with NaNs, and points on a teammate, are skipped."""
+        landmarks, is in the map too. Rows with NaNs, points on a teammate and the water surface (within
+        ``SURFACE_BAND_M`` of ``surface_z``) are skipped. Returns the points taken for structure, before
+        the thinning to one a cell: what :func:`discover_on_map` takes as ``surface_points``."""
         camera = np.asarray(camera_position, float).reshape(3)
         if not np.all(np.isfinite(camera)):
-            return
+            return np.zeros((0, 3))
         points = np.asarray(points, float).reshape(-1, 3)
         points = points[np.isfinite(points).all(axis=1)]
         self._carve(camera, points)
@@ -363,6 +365,7 @@ class RobotMap:
         self._stacked = None
         for key, point in zip(keys, points, strict=True):
             self.surface.put(key, point)
+        return points
 
     def _carve(self, camera: np.ndarray, targets: np.ndarray) -> None:
         if len(targets) == 0:
@@ -549,8 +552,8 @@ def discover_on_map(
 ) -> MapAwareResult:
     """Map-aware discovery (module docstring) on a keyframe mesh ``vertices`` ``(V, 3)``, ``faces``
     ``(F, 3)``, seen from ``camera_position``, with the ``existing`` task rows ``(N, 6)`` the robot knows.
-    ``surface_points`` ``(M, 3)``, the keyframe's dense depth, give candidates too, one per
-    ``dense_candidates_m`` cell, each taken as a face shrunk to the point.
+    ``surface_points`` ``(M, 3)``, the keyframe's dense depth as :meth:`RobotMap.add_surface` kept it,
+    give candidates too, one per ``dense_candidates_m`` cell, each taken as a face shrunk to the point.
     ``robot_map`` must already hold this keyframe (:meth:`RobotMap.add_keyframe`). The candidate standoff
     and the view's frustum are ``discovery``'s (the paper's ``L_i`` and the OAK-D's field of view). Faces
     on a teammate (``teammates``, :func:`near_teammates`) count as having no support."""
@@ -559,19 +562,15 @@ def discover_on_map(
     existing_rows = validate_viewpoints([] if existing is None else existing, "existing tasks")
     vertices = np.asarray(vertices, float).reshape(-1, 3)
     faces = np.asarray(faces, int).reshape(-1, 3)
-    empty = MapAwareResult(np.zeros((0, 6)), 0, 0, 0, 0, 0, 0)
-    if len(faces) == 0 and (surface_points is None or len(surface_points) == 0):
-        return empty
     triangles = vertices[faces]
     if surface_points is not None and params.dense_candidates_m > 0:
         spots = np.asarray(surface_points, float).reshape(-1, 3)
-        spots = spots[np.isfinite(spots).all(axis=1)]
-        if len(spots):
-            _, first = np.unique(voxel_keys(spots, params.dense_candidates_m), axis=0, return_index=True)
-            spots = spots[np.sort(first)]
-            if params.surface_z is not None:
-                spots = spots[spots[:, 2] < params.surface_z - SURFACE_BAND_M]
-            triangles = np.concatenate([triangles, np.repeat(spots[:, None, :], 3, axis=1)])
+        spots = spots[np.isfinite(spots).all(axis=1)]  # NaN has no voxel key
+        _, first = np.unique(voxel_keys(spots, params.dense_candidates_m), axis=0, return_index=True)
+        spots = spots[np.sort(first)]
+        triangles = np.concatenate([triangles, np.repeat(spots[:, None, :], 3, axis=1)])
+    if len(triangles) == 0:
+        return MapAwareResult(np.zeros((0, 6)), 0, 0, 0, 0, 0, 0)
     good = np.isfinite(triangles).all(axis=(1, 2))
     triangles = triangles[good]
     centres = triangles.mean(axis=1)

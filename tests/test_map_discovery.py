@@ -470,9 +470,10 @@ def test_the_water_surface_seen_from_below_is_no_structure():
     xs, ys = np.meshgrid(np.arange(1.2, 2.8, 0.1), np.arange(1.0, 3.0, 0.1))
     surface = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 1.97)])
     wall = np.column_stack([np.full(10, 3.0), np.full(10, 2.0), np.linspace(0.5, 1.84, 10)])
-    robot_map.add_surface(camera, np.vstack([surface, wall]))
+    taken = robot_map.add_surface(camera, np.vstack([surface, wall]))
     kept = robot_map.points()
     assert len(kept) == 10 and (kept[:, 2] < 2.0 - 0.15).all()  # the wall's points, none of the surface
+    np.testing.assert_array_equal(taken, wall)  # and what discovery is handed as the keyframe's structure
     # without a datum nothing is dropped
     unknown = RobotMap(MapAwareParams())
     unknown.add_surface(camera, np.vstack([surface, wall]))

@@ -272,7 +272,7 @@ def test_the_searchs_offsets_are_the_whole_grid_then_one_ring_at_a_time():
         sorted(o for o in grid if 0 < chebyshev(o) <= 1.2 + 1e-9),
     ]
     for ring, want in enumerate(expected):
-        offsets, bound = anchors._search_offsets()
+        offsets, bound = anchors._next_search()
         got = sorted((round(dx, 6), round(dy, 6)) for dx, dy in offsets.tolist())
         assert got == [(round(a, 6), round(b, 6)) for a, b in want]
         if ring in (0, 5):  # the first search keeps its bound of max_global_correction_m
@@ -282,7 +282,7 @@ def test_the_searchs_offsets_are_the_whole_grid_then_one_ring_at_a_time():
     # with no rings beyond the first search, every search is the whole grid
     anchors = AnchorMap(INTRINSICS, dataclasses.replace(params, max_lost_search_m=1.2))
     for _ in range(3):
-        offsets, bound = anchors._search_offsets()
+        offsets, bound = anchors._next_search()
         assert len(offsets) == 80 and bound == params.max_global_correction_m
 
 

@@ -125,10 +125,11 @@ def perceive(
                 )
                 surface = None
                 if robot_map.params.dense_depth:
-                    surface = dense_points(
-                        job.left, job.right, front.intrinsics, pose.position, pose.rotation
+                    surface = robot_map.add_surface(
+                        pose.position,
+                        dense_points(job.left, job.right, front.intrinsics, pose.position, pose.rotation),
+                        teammates=job.teammates,
                     )
-                    robot_map.add_surface(pose.position, surface, teammates=job.teammates)
                 found = discover_on_map(
                     robot_map,
                     mesh.vertices,

@@ -360,7 +360,7 @@ class AnchorMap:
         searching = fix is None and sigma_m >= self.params.global_sigma_m
         self._unsure_frames = self._unsure_frames + 1 if searching else 0
         if searching and (self._unsure_frames - 1) % self.params.search_every_frames == 0:
-            found = self._search(pose, pixels, descriptors, valid, *self._search_offsets())
+            found = self._search(pose, pixels, descriptors, valid, *self._next_search())
             if found is not None:
                 self._ring = 0
                 self.fixes += 1
@@ -371,7 +371,7 @@ class AnchorMap:
         self.fixes += fix is not None
         return fix, matched
 
-    def _search_offsets(self) -> tuple[np.ndarray, float]:
+    def _next_search(self) -> tuple[np.ndarray, float]:
         """The horizontal offsets ``(K, 2)`` this search tries, and how far its fix may be from the
         prediction: the whole grid of ``global_step_m`` out to ``max_global_correction_m`` first (a fix
         within that), then one square ring of the grid beyond it per search, out to
@@ -400,7 +400,7 @@ class AnchorMap:
         bound: float,
     ) -> tuple[Fix, np.ndarray] | None:
         """The fix with the most inliers among guided matches from predictions moved by each horizontal
-        offset (:meth:`_search_offsets`; a descriptor match against the whole map fails on a tank's
+        offset (:meth:`_next_search`; a descriptor match against the whole map fails on a tank's
         repeated texture: Lowe's ratio test finds a near twin for nearly every keypoint), each needing
         ``global_min_inliers`` and lying within ``bound`` of the prediction; None when none has them."""
         p = self.params
