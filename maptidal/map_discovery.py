@@ -38,7 +38,11 @@ it) and adds five rules, each with its reason:
    lies within ``clearance_m`` of it, it is ``clearance_m`` below the
    surface (the depth sensor's datum, ``surface_z``), and no landmark lies on its line of sight to the
    face. No tank model and no simulator truth is read. Water the robot has not yet seen is not free: a
-   face seen at a grazing angle waits until the robot has seen the water in front of it.
+   face seen at a grazing angle waits until the robot has seen the water in front of it. A viewpoint
+   that fails is moved straight up or down, its view unchanged, to the nearest height that passes, by
+   up to ``max_lift_fraction`` of the view's half-height at the standoff (:func:`lift_into_free`): a
+   face near the floor or the water surface has its viewpoint there, where no robot holds station, and
+   is looked at from the edge of the water the robot can hold, the face still in the picture.
 5. **Views that add little are dropped.** Each candidate sees a set of map points (those in its
    frustum, on a voxel grid of ``coverage_voxel_m``). A greedy cover (the standard greedy algorithm for
    set cover, Chvatal 1979) takes the candidate that sees the most points no view yet covers, the views
@@ -78,6 +82,8 @@ __all__ = [
     "RobotMap",
     "discover_on_map",
     "fit_planes",
+    "lift_into_free",
+    "lift_offsets",
     "near_teammates",
     "reachable_on_map",
     "unpack_voxels",
@@ -143,6 +149,15 @@ class MapAwareParams:
     # mission sets its robots' largest pitch for a view plus the direction tolerance a view is judged
     # by, since a robot declines a view it cannot pitch to (maptidal.mission.verification.pitch_to_fly)
     max_view_pitch_deg: float | None = None
+    # a viewpoint that is not in free water (rule 4) may be moved straight up or down, its view unchanged,
+    # by up to this fraction of the view's half-height at the standoff (1 m x tan(27 deg) = 0.51 m for the
+    # OAK-D: up to 0.38 m), the face then still a quarter of the half-image from the frame's edge. A face
+    # near the floor or the water surface has its viewpoint there, closer than ``clearance_m`` to them;
+    # moved to where the robot can hold station, the level view still holds the face, as the paper's
+    # baselines' top and bottom lanes are flown (0: not moved)
+    max_lift_fraction: float = 0.75
+    # the lift is tried in steps of this size, smallest first, up before down at each size
+    lift_step_m: float = 0.05
 
     def __post_init__(self) -> None:
         for name in (
@@ -152,6 +167,7 @@ class MapAwareParams:
             "voxel_m",
             "coverage_voxel_m",
             "look_range_m",
+            "lift_step_m",
         ):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
@@ -169,6 +185,8 @@ class MapAwareParams:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"map-aware {name} must be a non-negative number, got {value!r}")
+        if not (isinstance(self.max_lift_fraction, int | float) and 0.0 <= self.max_lift_fraction <= 1.0):
+            raise ValueError(f"map-aware max_lift_fraction must be in [0, 1], got {self.max_lift_fraction!r}")
         if not 0.0 <= self.min_new_fraction <= 1.0:
             raise ValueError(f"map-aware min_new_fraction must be in [0, 1], got {self.min_new_fraction!r}")
         if self.min_support < 3 or self.min_new_points < 1:
@@ -483,6 +501,7 @@ class MapAwareResult:
     not_free: int
     redundant: int
     too_steep: int = 0
+    lifted: int = 0
 
     def counts(self) -> dict[str, int]:
         """The candidate counts by rule, for logs and reports."""
@@ -493,6 +512,7 @@ class MapAwareResult:
             "bridging": self.bridging,
             "too_steep": self.too_steep,
             "not_free": self.not_free,
+            "lifted": self.lifted,
             "redundant": self.redundant,
             "final": len(self.final),
         }
@@ -530,6 +550,38 @@ def reachable_on_map(
             hits = tree.query_ball_point(samples, params.line_of_sight_radius_m, return_length=True)
             ok[row] = not np.any(hits)
     return ok
+
+
+def lift_offsets(params: MapAwareParams, discovery: DiscoveryParams) -> np.ndarray:
+    """The vertical moves rule 4 tries on a viewpoint not in free water, in order: smallest first, up
+    before down, in ``lift_step_m`` steps up to ``max_lift_fraction`` of the view's half-height at the
+    standoff."""
+    most = params.max_lift_fraction * discovery.standoff * math.tan(math.radians(discovery.vfov_deg / 2.0))
+    sizes = np.arange(1, int(most / params.lift_step_m + 1e-9) + 1) * params.lift_step_m
+    return np.column_stack([sizes, -sizes]).ravel()
+
+
+def lift_into_free(
+    robot_map: RobotMap, rows: np.ndarray, discovery: DiscoveryParams, tree: cKDTree | None = None
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Rule 4's free water, with the lift: each viewpoint row ``(N, 6)`` that
+    :func:`reachable_on_map` refuses is moved straight up or down by the first of :func:`lift_offsets`
+    that it accepts, its view direction unchanged. Returns the rows (moved where lifted), which of them are
+    free, and how many were lifted."""
+    rows = np.array(rows, float).reshape(-1, 6)
+    free = reachable_on_map(robot_map, rows, discovery.standoff, tree)
+    lifted = 0
+    for offset in lift_offsets(robot_map.params, discovery):
+        waiting = np.flatnonzero(~free)
+        if len(waiting) == 0:
+            break
+        moved = rows[waiting].copy()
+        moved[:, 2] += offset
+        now_free = reachable_on_map(robot_map, moved, discovery.standoff, tree)
+        rows[waiting[now_free]] = moved[now_free]
+        free[waiting[now_free]] = True
+        lifted += int(now_free.sum())
+    return rows, free, lifted
 
 
 def _covered(rows: np.ndarray, cells: np.ndarray, camera) -> np.ndarray:
@@ -606,8 +658,8 @@ def discover_on_map(
         flyable = np.abs(rows[:, 5]) <= math.sin(math.radians(params.max_view_pitch_deg)) + 1e-12
         too_steep = int((~flyable).sum())
         rows = rows[flyable]
-    # ... in water the robot has seen
-    free = reachable_on_map(robot_map, rows, discovery.standoff, tree)
+    # ... in water the robot has seen, moved up or down into it if need be
+    rows, free, lifted = lift_into_free(robot_map, rows, discovery, tree)
     rows = rows[free]
     # rule 5: a greedy cover of the map's cells, the known tasks' views counting as covered
     redundant_before = len(rows)
@@ -639,4 +691,5 @@ def discover_on_map(
         not_free=int((~free).sum()),
         redundant=redundant_before - len(final),
         too_steep=too_steep,
+        lifted=lifted,
     )

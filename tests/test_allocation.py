@@ -60,8 +60,11 @@ entry_st = st.tuples(
     n_tasks=st.integers(0, 4),
     position_cm=st.one_of(st.none(), st.tuples(*[st.integers(-32767, 32767)] * 3)),
     giving_way=st.booleans(),
+    idle=st.booleans(),
 )
-def test_messages_round_trip_exactly(sender, seq, clocks, acks, entries, n_tasks, position_cm, giving_way):
+def test_messages_round_trip_exactly(
+    sender, seq, clocks, acks, entries, n_tasks, position_cm, giving_way, idle
+):
     tasks = [
         Task.create(task_key(3, c), [c * 0.37, -2.5, 1.01], [1, c, -0.5], ("camera",)) for c in range(n_tasks)
     ]
@@ -76,11 +79,12 @@ def test_messages_round_trip_exactly(sender, seq, clocks, acks, entries, n_tasks
         bids=np.array([b for *_, b in entries]),
         position=None if position_cm is None else tuple(v / 100.0 for v in position_cm),
         giving_way=giving_way,
+        idle=idle,
     )
     data = encode(message)
     assert len(data) == size_of(len(clocks), len(acks), n_tasks, len(entries))
     assert decode(data).position == message.position  # to the centimetre, or unknown
-    assert decode(data).giving_way == giving_way
+    assert decode(data).giving_way == giving_way and decode(data).idle == idle
     back = decode(data)
     assert (back.sender, back.seq, back.acks) == (sender, seq, acks)
     assert back.clocks_ms.tolist() == clocks
@@ -210,16 +214,20 @@ def test_damaged_messages_are_rejected_with_a_reason(mangle, reason):
     assert caught.value.reason == reason
 
 
-def test_status_bits_beyond_giving_way_are_malformed():
+def test_status_bits_beyond_giving_way_and_idle_are_malformed():
     body = bytearray(_a_message()[:-2])
     status_at = 7 + 6  # after the header (version, sender, seq u32, n_clocks) and the position
     assert body[status_at] == 0
-    body[status_at] = 0x02
-    with pytest.raises(MessageError) as caught:
-        decode(_with_crc(bytes(body)))
-    assert caught.value.reason == "malformed"
-    body[status_at] = 0x01
-    assert decode(_with_crc(bytes(body))).giving_way
+    for bad in (0x04, 0x80, 0x07):
+        body[status_at] = bad
+        with pytest.raises(MessageError) as caught:
+            decode(_with_crc(bytes(body)))
+        assert caught.value.reason == "malformed"
+    # giving way is bit 0, idle bit 1, as written on the wire
+    for bits, flags in ((0x01, (True, False)), (0x02, (False, True)), (0x03, (True, True))):
+        body[status_at] = bits
+        decoded = decode(_with_crc(bytes(body)))
+        assert (decoded.giving_way, decoded.idle) == flags
 
 
 def test_wrong_version_is_rejected_even_with_a_good_checksum():

@@ -35,8 +35,10 @@ def test_an_unsure_robot_goes_home_and_is_found_again_only_when_sure(tmp_path):
         assert not mission._lost(robot, 0.5)
         robot.position_sigma_m = mission.params.lost_sigma_m + 0.01  # a fix came, but it is unsure
         robot.visual_updates = 2
-        assert mission._lost(robot, 1.0)
-        # its way home: from where it believes it is to where it explored from, facing that way
+        assert mission._lost(robot, 1.0) and robot.lost_why == "uncertain"
+        # its way home: from where it believes it is to where it explored from, facing that way, and the
+        # sweep there
+        assert len(robot.recovery.legs) == 4
         end = robot.recovery.at(robot.recovery.duration + 1.0)
         assert end.position == pytest.approx(home) and math.remainder(
             end.yaw - home_yaw, math.tau
@@ -61,6 +63,38 @@ def test_an_unsure_robot_goes_home_and_is_found_again_only_when_sure(tmp_path):
         _close(mission)
     kinds = [e["kind"] for e in read_events(tmp_path) if e.get("robot") == "rov1"]
     assert kinds == ["position_lost", "position_regained", "position_lost"]
+
+
+def test_a_robot_that_lost_its_fix_is_found_again_at_its_next_sure_fix(tmp_path):
+    # the halved limit is for a robot lost as unsure: one that went without a fix while 8 cm sure of
+    # itself (as the default mission's robot without a DVL is) waited for many fixes to halve a limit it
+    # never passed
+    scenario, _ = load_mission(None)
+    mission = Mission(scenario, MissionParams(duration_s=10.0, plots=False), tmp_path)
+    params = mission.params
+    try:
+        robot = mission.robots["rov1"]
+        mission._start_exploring(robot, 0.0)
+        home = robot.home_position.copy()
+        robot.visual_updates, robot.position_sigma_m = 1, 0.08
+        assert not mission._lost(robot, 0.5)
+        lost_at = 0.5 + params.lost_after_s + 0.1
+        assert mission._lost(robot, lost_at) and robot.lost_why == "no_fix"
+        # it goes home, as any lost robot does, and sweeps there
+        assert len(robot.recovery.legs) == 4
+        assert robot.recovery.legs[0].at(robot.recovery.legs[0].duration).position == pytest.approx(home)
+        # a fix as sure as before (8 cm, over half the 15 cm limit) finds it again
+        robot.visual_updates = 2
+        assert not mission._lost(robot, lost_at + 1.0)
+        # one too unsure does not
+        assert mission._lost(robot, lost_at + 2.0 + params.lost_after_s)
+        robot.visual_updates, robot.position_sigma_m = 3, params.lost_sigma_m + 0.01
+        assert mission._lost(robot, lost_at + 3.0 + params.lost_after_s)
+    finally:
+        _close(mission)
+    lost = [e for e in read_events(tmp_path) if e["kind"] == "position_lost"]
+    assert [e["why"] for e in lost] == ["no_fix", "no_fix"]
+    assert lost[0]["sigma_m"] == pytest.approx(0.08) and lost[0]["unfixed_s"] > params.lost_after_s
 
 
 def test_a_perturbed_motion_model_is_heavier_and_less_damped():

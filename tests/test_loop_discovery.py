@@ -40,7 +40,7 @@ WRONG_TANK = TankModel(
 )
 
 
-def _fly(mode: str, out, duration_s: float = 55.0, apart: bool = True) -> tuple[Mission, dict]:
+def _fly(mode: str, out, duration_s: float = 75.0, apart: bool = True) -> tuple[Mission, dict]:
     scenario, _ = load_mission(None)
     if mode == "map-aware":  # the loop's tank-model check must not even be called
         run_module.reachable = _never
@@ -111,7 +111,10 @@ def test_each_keyframe_reports_what_each_rule_removed(map_aware):
     assert keyframes
     for event in keyframes:
         rules = event["rules"]
-        removed = sum(rules[k] for k in ("no_support", "not_planar", "bridging", "not_free", "redundant"))
+        removed = sum(
+            rules[k] for k in ("no_support", "not_planar", "bridging", "too_steep", "not_free", "redundant")
+        )
+        assert 0 <= rules["lifted"] <= rules["candidates"]
         assert removed + rules["final"] == rules["candidates"]
         assert rules["final"] == event["new_tasks"]
 

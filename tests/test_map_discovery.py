@@ -6,6 +6,7 @@ one a ray written out here crosses, a covered point is one a frustum tested poin
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,8 @@ from maptidal.map_discovery import (
     RobotMap,
     discover_on_map,
     fit_planes,
+    lift_into_free,
+    lift_offsets,
     near_teammates,
     reachable_on_map,
 )
@@ -478,3 +481,105 @@ def test_the_water_surface_seen_from_below_is_no_structure():
     unknown = RobotMap(MapAwareParams())
     unknown.add_surface(camera, np.vstack([surface, wall]))
     assert len(unknown.points()) > 10
+
+
+# ----- rule 4's lift: a viewpoint moved up or down into water the robot can hold --------------------------
+
+
+def test_the_lifts_are_tried_smallest_first_up_before_down_within_the_view():
+    # the OAK-D's 54.1 deg vertical field at the 1 m standoff: half-height tan(27.05 deg) = 0.5107 m, three
+    # quarters of it 0.383 m, so 5 cm steps up to 35 cm, written out
+    offsets = lift_offsets(MapAwareParams(), DiscoveryParams())
+    expected = [0.05, -0.05, 0.1, -0.1, 0.15, -0.15, 0.2, -0.2, 0.25, -0.25, 0.3, -0.3, 0.35, -0.35]
+    assert np.allclose(offsets, expected)
+    assert len(lift_offsets(MapAwareParams(max_lift_fraction=0.0), DiscoveryParams())) == 0
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="max_lift_fraction"):
+            MapAwareParams(max_lift_fraction=bad)
+    with pytest.raises(ValueError, match="lift_step_m"):
+        MapAwareParams(lift_step_m=0.0)
+
+
+def _low_and_high_faces(rng):
+    """A wall at x = 3 (4 m wide, up to the surface at z = 2) and a floor at z = 0 whose landmarks stop
+    0.6 m short of the wall (a grazing view leaves few there), seen from (1, 2, 1); faces on the wall at
+    z = 0.25 and z = 1.85, whose 1 m viewpoints lie 25 cm over the floor's landmarks and 15 cm under the
+    surface."""
+    wall = _plane_points([3, 0, 0], [0, 1, 0], [0, 0, 1], 4.0, 2.0, 0.1, rng)
+    floor = _plane_points([0.6, 0, 0], [1, 0, 0], [0, 1, 0], 1.8, 4.0, 0.1, rng)
+    points = np.vstack([wall, floor])
+    camera = np.array([1.0, 2.0, 1.0])
+    faces = [_face_at(points, [3.0, y, z]) for y, z in ((1.0, 0.25), (3.0, 1.85))]
+    return points, camera, np.vstack([points[f] for f in faces]), [[0, 1, 2], [3, 4, 5]]
+
+
+def _in_view(row, point, discovery):
+    # the point inside the row's frustum, by angles from its axis (the row looks level along +x here)
+    offset = np.asarray(point, float) - row[:3]
+    depth = offset @ row[3:]
+    return 0 < depth <= discovery.far_range and abs(offset[2]) / depth <= math.tan(
+        math.radians(discovery.vfov_deg / 2)
+    )
+
+
+def test_a_face_near_the_floor_or_the_surface_is_viewed_from_the_nearest_height_the_robot_can_hold():
+    rng = np.random.default_rng(21)
+    points, camera, vertices, triangles = _low_and_high_faces(rng)
+    discovery = DiscoveryParams()
+    params = MapAwareParams(surface_z=2.0, min_new_fraction=0.0, min_new_points=1)
+    unlifted = discover_on_map(
+        _map_of(points, np.arange(len(points)), camera, replace(params, max_lift_fraction=0.0)),
+        vertices,
+        triangles,
+        camera,
+    )
+    # without the lift both viewpoints are refused: too near the floor, too near the surface
+    assert unlifted.not_free == 2 and len(unlifted.final) == 0 and unlifted.lifted == 0
+    robot_map = _map_of(points, np.arange(len(points)), camera, params)
+    lifted = discover_on_map(robot_map, vertices, triangles, camera)
+    assert lifted.lifted == 2 and lifted.not_free == 0 and len(lifted.final) == 2
+    low, high = sorted(lifted.final, key=lambda row: row[2])
+    # straight up and straight down, still 1 m from the wall and looking level at it
+    assert np.allclose(low[[0, 1]], [2.0, 1.0], atol=0.05)
+    assert np.allclose(high[[0, 1]], [2.0, 3.0], atol=0.05)
+    assert low[3] > 0.99 and high[3] > 0.99
+    # both the clearance from every landmark (brute force), the high one under the surface by it too
+    for row in (low, high):
+        assert np.linalg.norm(points - row[:3], axis=1).min() >= params.clearance_m
+    assert high[2] <= 2.0 - params.clearance_m + 1e-9
+    # moved from the faces' heights (the centroid's, to the few mm that the plane fit's tilt makes over the
+    # 1 m standoff) by a whole number of 5 cm steps, by no more than three quarters of the view's half-height
+    for row, z in ((low, vertices[:3, 2].mean()), (high, vertices[3:, 2].mean())):
+        steps = (row[2] - z) / 0.05
+        assert abs(steps - round(steps)) < 0.1 and abs(row[2] - z) <= 0.39
+        # the smallest such move: one step less is refused
+        back = row.copy()
+        back[2] -= np.sign(row[2] - z) * 0.05
+        assert not reachable_on_map(robot_map, back[None], 1.0)[0]
+        # and the face is still in the view
+        assert _in_view(row, [3.0, row[1], z], discovery)
+    # a lift capped at 10 cm cannot reach the heights the robot can hold
+    capped = discover_on_map(
+        _map_of(points, np.arange(len(points)), camera, replace(params, max_lift_fraction=0.2)),
+        vertices,
+        triangles,
+        camera,
+    )
+    assert capped.not_free == 2 and capped.lifted == 0
+
+
+def test_a_lift_does_not_take_a_viewpoint_through_a_wall():
+    rng = np.random.default_rng(22)
+    points, ids, camera = _wall_scene(rng)
+    robot_map = _map_of(points, ids, camera, MapAwareParams(surface_z=2.0))
+    rows = np.array(
+        [
+            [2.0, 2.0, 1.0, 1, 0, 0],  # fine where it is: not moved
+            [4.0, 2.0, 1.0, -1, 0, 0],  # behind the wall: no height is in seen water
+            [2.0, 2.0, 0.2, 1, 0, 0],  # 20 cm over the floor: moved up
+        ]
+    )
+    moved, free, lifted = lift_into_free(robot_map, rows, DiscoveryParams())
+    assert free.tolist() == [True, False, True] and lifted == 1
+    assert np.array_equal(moved[:2], rows[:2])
+    assert np.array_equal(moved[2, [0, 1, 3, 4, 5]], rows[2, [0, 1, 3, 4, 5]]) and 0.35 <= moved[2, 2] <= 0.55

@@ -580,6 +580,48 @@ def test_a_robot_keeps_clear_of_a_teammate_it_has_heard_from(tmp_path):
     mission.sim.close()
 
 
+def test_a_robot_with_nothing_left_to_do_gets_out_of_the_way_and_nobody_waits_on_it(tmp_path):
+    # a teammate that had finished held the way home of a lost robot for the last 350 s of a mission:
+    # the robot waited on it, and it on nothing
+    from maptidal.allocation.messages import decode
+    from maptidal.controllers.trajectory import PoseReference
+
+    scenario, _ = load_mission(None)
+    mission = Mission(
+        scenario, MissionParams(duration_s=1.0, clearance_m=1.0, peer_fresh_s=30.0, plots=False), tmp_path
+    )
+    rov0, rov1 = mission.robots["rov0"], mission.robots["rov1"]
+    agent0, agent1 = mission.auction.agents[rov0.index], mission.auction.agents[rov1.index]
+    _placed(mission, {"rov0": [0.0, 0.0, 1.0], "rov1": [0.6, 0.0, 1.0]})
+    agent1.peer_positions[rov0.index] = (np.array([0.0, 0.0, 1.0]), 10.0)
+    agent0.peer_positions[rov1.index] = (np.array([0.6, 0.0, 1.0]), 10.0)
+
+    def reference(at):
+        return PoseReference(np.asarray(at, float), np.zeros(3), np.zeros(3), 0.0, 0.0)
+
+    hold = reference([0.0, 0.0, 1.0])
+    # busy, rov0 (the lower index) holds its place with rov1 60 cm away, rov1 giving way to it
+    agent0.peer_giving_way[rov1.index] = True
+    rov0.activity, rov0.explored = "fly", False
+    assert mission._keep_clear(rov0, hold, now=12.0) is hold and not agent0.idle
+    # finished, it backs out of rov1's ball all the same, horizontally, away from rov1, and says it is
+    # idle
+    rov0.activity, rov0.explored = "idle", True
+    out = mission._keep_clear(rov0, hold, now=12.0).position
+    assert abs(np.linalg.norm(out - [0.6, 0.0, 1.0]) - 1.0) < 1e-9 and out[0] < 0 and out[2] == 1.0
+    assert agent0.idle and agent0.giving_way
+    data = agent0.make_message(12.0)
+    message = decode(data)
+    assert message.idle and message.giving_way
+    # rov1, bound past it, waits on it while it is busy ...
+    beyond = reference([-2.0, 0.0, 1.0])
+    assert mission._keep_clear(rov1, beyond, now=12.0) is not beyond
+    # ... and not once its message says it is idle
+    assert agent1.receive(data, 13.0) and agent1.peer_idle[rov0.index]
+    assert mission._keep_clear(rov1, beyond, now=13.0) is beyond
+    mission.sim.close()
+
+
 def test_a_robot_giving_way_takes_its_route_up_where_it_left_off(tmp_path):
     """Its route pauses while it waits: once clear, the reference goes on from the waiting point, not
     from where the route's clock would have put it (a leap the robot would rush at full thrust)."""

@@ -119,6 +119,10 @@ class CBBAAgent:
         self.peer_giving_way: dict[int, bool] = {}
         self.giving_way = False
         self._sent_giving_way = False
+        # nothing left to do (the mission sets it): such a robot gives way to every teammate
+        self.peer_idle: dict[int, bool] = {}
+        self.idle = False
+        self._sent_idle = False
         self.tasks: list[Task] = []
         self._slot_of: dict[int, int] = {}
         self._keys = np.zeros(0, dtype=np.int64)  # task keys in slot order
@@ -451,6 +455,7 @@ class CBBAAgent:
         if message.position is not None:
             self.peer_positions[sender] = (np.asarray(message.position, float), now_s)
         self.peer_giving_way[sender] = message.giving_way
+        self.peer_idle[sender] = message.idle
         self._peer_task_array(sender)
         self._apply_acks(sender, message.acks)
         if message.tasks:
@@ -570,7 +575,8 @@ class CBBAAgent:
         heartbeat_due = (
             self._last_sent_ms is None or now - self._last_sent_ms >= self.params.heartbeat_s * 1000
         )
-        news = self.giving_way != self._sent_giving_way  # a teammate may be waiting to hear it
+        # a teammate may be waiting to hear it
+        news = self.giving_way != self._sent_giving_way or self.idle != self._sent_idle
         if not (entries.any() or records.any() or self._ack_owed or heartbeat_due or news):
             return None
         n_clocks = int(np.flatnonzero(self.clocks != NEVER).max()) + 1
@@ -596,6 +602,7 @@ class CBBAAgent:
             bids=self.y[entry_slots],
             position=tuple(float(v) for v in self.robot.position),  # type: ignore[arg-type]
             giving_way=self.giving_way,
+            idle=self.idle,
         )
         data = encode(message)
         self._sent[self._seq] = (entry_slots, self.z[entry_slots], self.y[entry_slots], record_slots)
@@ -611,6 +618,7 @@ class CBBAAgent:
             del self._ack_owed[robot]
         self._last_sent_ms = now
         self._sent_giving_way = self.giving_way
+        self._sent_idle = self.idle
         self.last_message_had_content = bool(len(entry_slots) or len(record_slots))
         self.stats.messages_sent += 1
         self.stats.bytes_sent += len(data)

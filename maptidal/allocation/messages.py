@@ -2,13 +2,15 @@
 
 One message is what a robot broadcasts in its transmit slot: its clock view of the team, the sequence
 numbers it acknowledges, new task records, and the bid entries that changed since its neighbours last
-acknowledged, and where it is. Layout (little-endian, version 4):
+acknowledged, and where it is. Layout (little-endian, version 5):
 
     header    version u8, sender u8, seq u32, n_clocks u8
     position  x/y/z int16 cm: where the sender was when it sent (-32768 x 3: unknown), so that teammates
               can keep clear of it
     status    u8 flags: bit 0 set while the sender gives way to a teammate (so that the teammate need
-              not give way to it, and two robots never wait on each other); the other bits are zero
+              not give way to it, and two robots never wait on each other); bit 1 set while it has
+              nothing left to do (it gives way to every teammate, and none waits on it); the other
+              bits are zero
     clocks    n_clocks x u32   last time heard of each robot, ms + 1 (0 = never)
     acks      n_acks u8, then n_acks x (robot u8, seq u32)
     tasks     n_runs u16, then runs of task records: a run is the tasks of one origin with consecutive
@@ -26,6 +28,8 @@ discoveries at 8 bytes a task (plus 11 a run), which is what lets a robot share 
 can fail with it (issue [truthful-loop]: at 500 bit/s a robot finds tasks faster than 13-byte records leave).
 Version 4 added the status byte: with positions heard 4 to 12 s late at 500 bit/s, only a robot told
 that a teammate gives way can safely not give way itself (maptidal.mission.run's keep-clear rule).
+Version 5 added the idle bit: a robot that had finished parked where it was, and a teammate whose way
+lay through it waited on it for the rest of the mission.
 Anything malformed raises MessageError with a short reason; decode never returns a half-read message.
 """
 
@@ -39,7 +43,7 @@ import numpy as np
 
 from maptidal.allocation.tasks import Task
 
-VERSION = 4
+VERSION = 5
 NO_WINNER = -1
 DONE = -2
 _WIRE_NONE = 255
@@ -50,6 +54,7 @@ _HEADER = struct.Struct("<BBIB")
 _POSITION = struct.Struct("<3h")
 _STATUS = struct.Struct("<B")
 _GIVING_WAY = 0x01
+_IDLE = 0x02  # the sender has nothing left to do: it gives way to every teammate
 _UNKNOWN_CM = -32768
 _ACK = struct.Struct("<BI")
 _COUNT = struct.Struct("<H")
@@ -78,7 +83,8 @@ class Message:
 
     clocks_ms: int64 per robot index (NEVER = -1); acks: (robot, seq) pairs; keys/winners/bids: the bid
     entries (winner NO_WINNER or DONE for the special codes; bids as float64 holding float32 values);
-    position: where the sender was, or None; giving_way: the sender was giving way to a teammate."""
+    position: where the sender was, or None; giving_way: the sender was giving way to a teammate; idle:
+    the sender had nothing left to do (it then gives way to every teammate, and none waits on it)."""
 
     sender: int
     seq: int
@@ -90,6 +96,7 @@ class Message:
     bids: np.ndarray = field(default_factory=lambda: np.zeros(0))
     position: tuple[float, float, float] | None = None  # the sender's, m (to the cm on the wire)
     giving_way: bool = False
+    idle: bool = False
 
     @property
     def has_content(self) -> bool:
@@ -168,7 +175,7 @@ def encode(message: Message) -> bytes:
         raise ValueError("at most 255 robots per message")
     parts = [_HEADER.pack(VERSION, message.sender, message.seq & 0xFFFFFFFF, len(clocks))]
     parts.append(_POSITION.pack(*_position_cm(message.position)))
-    parts.append(_STATUS.pack(_GIVING_WAY if message.giving_way else 0))
+    parts.append(_STATUS.pack((_GIVING_WAY if message.giving_way else 0) | (_IDLE if message.idle else 0)))
     parts.append((clocks + 1).astype("<u4").tobytes())
     parts.append(bytes([len(message.acks)]))
     parts.extend(_ACK.pack(robot, seq & 0xFFFFFFFF) for robot, seq in message.acks)
@@ -222,7 +229,7 @@ def decode(data: bytes) -> Message:
     position_cm = _POSITION.unpack_from(body, _HEADER.size)
     position = None if position_cm == (_UNKNOWN_CM,) * 3 else tuple(v / 100.0 for v in position_cm)
     (status,) = _STATUS.unpack_from(body, _HEADER.size + _POSITION.size)
-    if status & ~_GIVING_WAY:
+    if status & ~(_GIVING_WAY | _IDLE):
         raise MessageError("malformed", f"status bits {status:#04x}")
     offset = _take(body, start, 4 * n_clocks)
     clocks = np.frombuffer(body, "<u4", n_clocks, start).astype(np.int64) - 1
@@ -272,4 +279,5 @@ def decode(data: bytes) -> Message:
         bids=bids,
         position=position,  # type: ignore[arg-type]
         giving_way=bool(status & _GIVING_WAY),
+        idle=bool(status & _IDLE),
     )

@@ -411,6 +411,8 @@ class _Robot:
     fixes_seen: int = 0
     last_fix_s: float = 0.0
     lost: bool = False
+    # what made it lost: "no_fix" or "uncertain" (MissionParams.lost_after_s, lost_sigma_m)
+    lost_why: str = ""
     position_sigma_m: float = 0.0  # its front end's horizontal standard deviation, as of the last frame
     home_position: np.ndarray = field(default_factory=lambda: np.zeros(3))  # where it explored from
     home_yaw: float = 0.0  # the heading it explored along (its map lies that way)
@@ -693,13 +695,23 @@ class Mission:
         Whom it gives way to: every teammate heard from lately, but one of a higher index only while that
         one's last message did not say it was giving way. A robot waiting on a lower-indexed teammate says
         so in its next message, and the other then goes on: two robots never wait on each other for
-        longer than that, and the lower index keeps the right of way."""
+        longer than that, and the lower index keeps the right of way. A robot with nothing left to do
+        (explored, no task) says so too, and gives way to every teammate, and none waits on it: it
+        backs out of the way of one that comes to it. Otherwise a robot that had finished could hold a
+        teammate's way, or the place its teammate has to go, for the rest of the mission."""
         agent = self.auction.agents[robot.index]
+        agent.idle = robot.activity == "idle" and robot.explored
         peers = [
             (peer, position)
             for peer, (position, heard_s) in agent.peer_positions.items()
             if now - heard_s <= self.params.peer_fresh_s
-            and (peer < robot.index or not agent.peer_giving_way.get(peer, False))
+            and (
+                agent.idle
+                or (
+                    not agent.peer_idle.get(peer, False)
+                    and (peer < robot.index or not agent.peer_giving_way.get(peer, False))
+                )
+            )
         ]
         stop = None
         if peers and self.params.clearance_m > 0:  # 0 turns keeping clear off
@@ -722,26 +734,42 @@ class Mission:
 
     def _lost(self, robot: _Robot, now: float) -> bool:
         """A robot without a DVL whose front end has had no visual fix for ``lost_after_s``, or whose
-        position it holds to be more than ``lost_sigma_m`` uncertain; it is found again once it has a
-        fix and is half as uncertain (so that it does not flicker between the two)."""
+        position it holds to be more than ``lost_sigma_m`` uncertain. One lost for want of a fix is found
+        again at its next fix, if that leaves it no more uncertain than ``lost_sigma_m``; one lost for its
+        uncertainty once it has a fix and is half as uncertain (so that it does not flicker between the
+        two). The hysteresis goes with the cause: a robot that lost its fix while sure of its position
+        (8 cm in the default mission) would otherwise wait for many fixes to halve a limit it never
+        passed."""
         if robot.has_dvl or self.params.pose_source != "vo":
             return False
         updates = robot.visual_updates
         if updates != robot.fixes_seen:
             robot.fixes_seen, robot.last_fix_s = updates, now
         unfixed = now - robot.last_fix_s > self.params.lost_after_s
-        limit = self.params.lost_sigma_m * (0.5 if robot.lost else 1.0)
+        halved = robot.lost and robot.lost_why == "uncertain"
+        limit = self.params.lost_sigma_m * (0.5 if halved else 1.0)
         lost = unfixed or robot.position_sigma_m > limit
         if lost != robot.lost:
             robot.lost = lost
             if lost:
+                robot.lost_why = "no_fix" if unfixed else "uncertain"
                 robot.controller.reset_horizontal()
                 # go back to where it explored from, the view its map knows best (its anchors there were
                 # made first, and surest), and turn to the heading it explored along: a robot staring at a
                 # bare patch of wall close up, or backing off step by step, never finds a fix
                 self._start_recovery(robot, now)
 
-            self.writer.event(now, "position_lost" if lost else "position_regained", robot=robot.name)
+            if lost:  # say why: no fix for a while, or a fix too unsure
+                self.writer.event(
+                    now,
+                    "position_lost",
+                    robot=robot.name,
+                    why=robot.lost_why,
+                    sigma_m=round(float(robot.position_sigma_m), 3),
+                    unfixed_s=round(now - robot.last_fix_s, 2),
+                )
+            else:
+                self.writer.event(now, "position_regained", robot=robot.name)
         return lost
 
     def _estimate(self, robot: _Robot):

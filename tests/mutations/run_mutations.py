@@ -364,6 +364,20 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             )
         ],
     ),
+    "V6": (
+        "a robot with nothing left to do gives way only as a busy one does",
+        [
+            (
+                "maptidal/mission/run.py",
+                "                agent.idle\n                or (",
+                "                False\n                or (",
+            )
+        ],
+    ),
+    "V7": (
+        "a busy robot waits on a teammate with nothing left to do",
+        [("maptidal/mission/run.py", "not agent.peer_idle.get(peer, False)\n", "True\n")],
+    ),
     "L1": (
         "the camera centre from rays with the projector's sign flipped (I + b b^T)",
         [("maptidal/perception/relocalisation.py", "np.eye(3)[None] - rays", "np.eye(3)[None] + rays")],
@@ -442,6 +456,16 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             )
         ],
     ),
+    "L13": (
+        "the found-again limit halved whatever made the robot lost",
+        [
+            (
+                "maptidal/mission/run.py",
+                'halved = robot.lost and robot.lost_why == "uncertain"',
+                "halved = robot.lost",
+            )
+        ],
+    ),
     "S1": (
         "a robot's own discoveries leave newest first",
         [
@@ -504,6 +528,16 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "maptidal/mission/sharing.py",
                 'kind = "rediscovered" if bool(((near <= position_tolerance_m) & aligned).any())',
                 'kind = "rediscovered" if bool((near <= position_tolerance_m).any())',
+            )
+        ],
+    ),
+    "S8": (
+        "the idle bit never written on the wire",
+        [
+            (
+                "maptidal/allocation/messages.py",
+                "| (_IDLE if message.idle else 0)",
+                "",
             )
         ],
     ),
@@ -941,6 +975,50 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
     "D15": (
         "the mission's maps without the steepest view its robots fly",
         [("maptidal/mission/run.py", ", max_view_pitch_deg=min(steepest, 90.0)", "")],
+    ),
+    "D16": (
+        "no lift: a viewpoint out of free water is dropped, as before",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "        waiting = np.flatnonzero(~free)\n",
+                "        waiting = np.zeros(0, int)\n",
+            )
+        ],
+    ),
+    "D17": (
+        "the lift only upwards",
+        [("maptidal/map_discovery.py", "np.column_stack([sizes, -sizes]).ravel()", "sizes")],
+    ),
+    "D18": (
+        "the largest lift tried first",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "np.column_stack([sizes, -sizes]).ravel()",
+                "np.column_stack([sizes, -sizes])[::-1].ravel()",
+            )
+        ],
+    ),
+    "D19": (
+        "a lifted viewpoint re-aimed at its face's old height",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "        moved[:, 2] += offset\n",
+                "        moved[:, 2] += offset\n        moved[:, 5] -= offset\n",
+            )
+        ],
+    ),
+    "D20": (
+        "the lift not bounded by the view's height",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "    most = params.max_lift_fraction * discovery.standoff",
+                "    most = 4.0 * params.max_lift_fraction * discovery.standoff",
+            )
+        ],
     ),
     "P1": (
         "a baseline's viewpoints out of the reach band left out, not moved into it",
