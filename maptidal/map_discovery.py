@@ -55,8 +55,8 @@ it) and adds five rules, each with its reason:
 Candidates come from the keyframe mesh's faces and, with ``dense_candidates_m`` above 0 (off by
 default), from the keyframe's dense depth as well, one per cell of that size, each taken as a face shrunk
 to its point: a bare stretch of wall gives the keypoint mesh no face, so no candidate, however well the
-dense depth maps it. It leaves less of the walls uninspected for more than twice the tasks (README,
-"Closed-loop mission"), so it is a choice, not the default.
+dense depth maps it. Since rule 4's lift it leaves no less of the walls uninspected than the default,
+for more than twice the tasks (README, "Closed-loop mission"), so it is off by default.
 
 Every number is a parameter of :class:`MapAwareParams`; the defaults are chosen by the reasoning given
 beside them, not fitted to a tank. Pure numpy and scipy: it runs on a real robot's landmarks as well.
