@@ -15,7 +15,9 @@ it) and adds five rules, each with its reason:
    no structure: landmarks and faces about where its last acoustic message put it are left out. Nor is
    the water surface, which the dense depth maps from below: dense points within ``SURFACE_BAND_M``
    (15 cm, the stereo depth error at the 3 m the dense depth reaches) of the depth sensor's datum
-   ``surface_z`` are left out.
+   ``surface_z`` are left out. Nor is structure beyond the region the robot was sent to inspect: faces
+   farther than ``region_radius_m`` from ``region_centre`` (in the loop, the robot's launch point and
+   its exploration radius) yield no candidate; a glimpse down a long wall is not a task.
 2. **Normals from local surface fits.** A face's normal is the smallest principal axis of the map points
    within ``support_radius_m`` of its centroid (the least-squares plane, as in Hoppe et al. 1992,
    "Surface reconstruction from unorganized points"), turned to face the camera that saw the face. One
@@ -26,7 +28,17 @@ it) and adds five rules, each with its reason:
    sampled surfaces") at most ``max_surface_variation``, which a flat patch meets under stereo noise and
    the crease between a wall and the floor does not. And the face itself must lie on that plane: each
    vertex and the centroid within ``plane_tolerance_m`` of it. A face spanning a wall and the floor, or a
-   near wall and a far one, has its centroid in open water, off every plane.
+   near wall and a far one, has its centroid in open water, off every plane. A face whose ball is not
+   planar is fitted again on its own plane (:func:`refit_on_faces`): the support points within
+   ``plane_tolerance_m`` of the face's plane, refitted ``refit_iterations`` times to the plane of those
+   points, as an iteratively reweighted fit with a hard cut does (Huber 1981, "Robust statistics"). A
+   face on a wall within the support radius of the floor, of a ladder or of a window shares its ball
+   with them, fails the fit over the whole ball, and has its wall back this way. The refitted plane
+   must hold what a surface under stereo noise gives: its points (those within ``plane_tolerance_m``)
+   spanning it both ways (middle principal variance at least ``plane_tolerance_m`` squared), and
+   gathered near it (``min_band_concentration`` of them within half the tolerance), where the plane of
+   a face that bridges a crease cuts both surfaces at an angle and holds their points evenly across the
+   band. A face off the plane of a planar ball bridges two surfaces of that ball, and is not retried.
 4. **A view the team can fly, in water the robot has seen.** A view steeper than ``max_view_pitch_deg``
    (up or down from level; the mission sets its robots' largest pitch for a view plus the tolerance a
    view is judged by) is dropped: a robot declines a view it cannot pitch to, so such a task would only
@@ -86,6 +98,7 @@ __all__ = [
     "lift_offsets",
     "near_teammates",
     "reachable_on_map",
+    "refit_on_faces",
     "unpack_voxels",
     "voxel_keys",
 ]
@@ -123,6 +136,12 @@ class MapAwareParams:
     min_new_points: int = 8
     # the water surface's height in the world frame, from the depth sensor's datum (None: not checked)
     surface_z: float | None = None
+    # the region the robot was sent to inspect: faces farther than region_radius_m from region_centre
+    # (the world frame) yield no candidate (None: everywhere). The mission sets the robot's launch point
+    # and its exploration radius (maptidal.exploration.FrontierParams.explore_radius_m), so that the
+    # robot inspects the structure it explores, and not what it glimpses beyond
+    region_centre: tuple[float, float, float] | None = None
+    region_radius_m: float | None = None
     # a teammate is not structure: landmarks and faces within this of where its last message put it are
     # left out, the radius growing by ``teammate_speed_m_s`` for each second the message is old. 0.39 m
     # is half the BlueROV2 Heavy's diagonal (0.457 x 0.575 x 0.254 m, Blue Robotics' technical details);
@@ -145,6 +164,17 @@ class MapAwareParams:
     # well the dense depth maps it; a quarter of the camera's footprint height at the 1 m standoff
     # (2 x 1 m x tan(27 deg) = 1.0 m) gives the greedy cover (rule 5) views to choose from at that grain
     dense_candidates_m: float = 0.0
+    # rule 3's second try for a face the whole ball's fit refuses (refit_on_faces): how many times the
+    # plane is refitted to the support points within plane_tolerance_m of it, starting from the face's
+    # own plane (0: no second try). A face's three landmarks, a few cm off each, tilt its plane by some
+    # 10 deg; each refit on the points it keeps brings it to their plane, and three are enough for the
+    # walls built by hand in the tests to come back within a degree
+    refit_iterations: int = 3
+    # ... and the refitted plane must hold its points near it: at least this share of the points within
+    # plane_tolerance_m of it lie within half that. Stereo noise of up to half the tolerance (5 cm, an
+    # observation's depth error at 1.8 m) leaves 0.68 or more there; a band that cuts a surface at an
+    # angle (a bridging face's plane across a crease), or a cloud, is filled evenly, 0.5
+    min_band_concentration: float = 2.0 / 3.0
     # the steepest view the team can fly, in degrees up or down from level (None: not checked): the
     # mission sets its robots' largest pitch for a view plus the direction tolerance a view is judged
     # by, since a robot declines a view it cannot pitch to (maptidal.mission.verification.pitch_to_fly)
@@ -187,10 +217,32 @@ class MapAwareParams:
                 raise ValueError(f"map-aware {name} must be a non-negative number, got {value!r}")
         if not (isinstance(self.max_lift_fraction, int | float) and 0.0 <= self.max_lift_fraction <= 1.0):
             raise ValueError(f"map-aware max_lift_fraction must be in [0, 1], got {self.max_lift_fraction!r}")
+        if not 0.0 <= self.min_band_concentration <= 1.0:
+            raise ValueError(
+                f"map-aware min_band_concentration must be in [0, 1], got {self.min_band_concentration!r}"
+            )
         if not 0.0 <= self.min_new_fraction <= 1.0:
             raise ValueError(f"map-aware min_new_fraction must be in [0, 1], got {self.min_new_fraction!r}")
+        if not (isinstance(self.refit_iterations, int) and self.refit_iterations >= 0):
+            raise ValueError(
+                f"map-aware refit_iterations must be a whole number >= 0, got {self.refit_iterations!r}"
+            )
         if self.min_support < 3 or self.min_new_points < 1:
             raise ValueError("map-aware min_support must be at least 3 and min_new_points at least 1")
+        if self.region_radius_m is not None and not (
+            isinstance(self.region_radius_m, int | float)
+            and math.isfinite(self.region_radius_m)
+            and self.region_radius_m > 0
+        ):
+            raise ValueError(
+                f"map-aware region_radius_m must be positive or None, got {self.region_radius_m!r}"
+            )
+        if self.region_centre is not None and not (
+            len(self.region_centre) == 3 and all(math.isfinite(float(c)) for c in self.region_centre)
+        ):
+            raise ValueError(
+                f"map-aware region_centre must be three finite numbers or None, got {self.region_centre!r}"
+            )
         if self.surface_z is not None and not math.isfinite(self.surface_z):
             raise ValueError(f"map-aware surface_z must be finite or None, got {self.surface_z!r}")
         if self.max_view_pitch_deg is not None and not 0.0 <= self.max_view_pitch_deg <= 90.0:
@@ -221,14 +273,33 @@ def unpack_voxels(packed) -> np.ndarray:
     return np.column_stack([(keys >> 42) & mask, (keys >> 21) & mask, keys & mask]) - (1 << 20)
 
 
+# a plane is fitted on at most this many of its ball's points, taken evenly through the ball (every k-th
+# in the k-d tree's order, which walks the ball cell by cell): a plane through 256 points under 4 cm of
+# noise across a 0.5 m ball is tilted by well under a degree, and the dense depth puts some thousand
+# points in a ball, whose moments would take most of a keyframe's discovery time
+FIT_POINTS = 256
+
+
+def _thinned(found: list[int]) -> list[int]:
+    return found[:: -(-len(found) // FIT_POINTS)] if len(found) > FIT_POINTS else found
+
+
 def fit_planes(
-    map_points: np.ndarray, centres: np.ndarray, radius: float, min_support: int, tree: cKDTree | None = None
+    map_points: np.ndarray,
+    centres: np.ndarray,
+    radius: float,
+    min_support: int,
+    tree: cKDTree | None = None,
+    balls: list | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The least-squares plane of the ``map_points`` within ``radius`` of each of ``centres`` ``(M, 3)``.
 
     Returns each fit's centroid ``(M, 3)``, unit normal ``(M, 3)`` (the smallest principal axis, sign
     arbitrary), surface variation ``(M,)`` and support count ``(M,)``. A centre with fewer than
-    ``min_support`` points has NaN centroid, normal and variation."""
+    ``min_support`` points has NaN centroid, normal and variation. A ball of more than
+    :data:`FIT_POINTS` points is fitted on that many of them, taken evenly through it. ``balls``, the
+    neighbour lists of ``tree.query_ball_point(centres, radius)`` when the caller has them already,
+    saves the search."""
     map_points = np.asarray(map_points, float).reshape(-1, 3)
     centres = np.asarray(centres, float).reshape(-1, 3)
     out_centroid = np.full((len(centres), 3), np.nan)
@@ -237,18 +308,21 @@ def fit_planes(
     support = np.zeros(len(centres), int)
     if len(map_points) == 0 or len(centres) == 0:
         return out_centroid, out_normal, out_variation, support
-    tree = tree or cKDTree(map_points)
-    neighbours = tree.query_ball_point(centres, radius)
+    if balls is None:
+        balls = (tree or cKDTree(map_points)).query_ball_point(centres, radius, return_sorted=False)
+    neighbours = balls
     support[:] = [len(found) for found in neighbours]
+    neighbours = [_thinned(found) for found in neighbours]
     rows = np.flatnonzero(support >= min_support)
     if len(rows) == 0:
         return out_centroid, out_normal, out_variation, support
     # every fit at once: each neighbour tagged with its fit, its offset from that fit's centre (small
     # numbers, so the moments lose no precision), then the moments by bincount and one stacked eigh
-    owner = np.repeat(np.arange(len(rows)), support[rows])
+    fitted = np.array([len(neighbours[row]) for row in rows], int)
+    owner = np.repeat(np.arange(len(rows)), fitted)
     index = np.concatenate([neighbours[row] for row in rows]).astype(np.intp)
     offsets = map_points[index] - centres[rows][owner]
-    count = support[rows].astype(float)
+    count = fitted.astype(float)
     mean = np.stack([np.bincount(owner, offsets[:, k], len(rows)) for k in range(3)], axis=1) / count[:, None]
     covariance = np.empty((len(rows), 3, 3))
     for i in range(3):
@@ -262,6 +336,94 @@ def fit_planes(
     with np.errstate(invalid="ignore", divide="ignore"):
         out_variation[rows] = np.where(total > 0, np.maximum(values[:, 0], 0.0) / total, np.nan)
     return out_centroid, out_normal, out_variation, support
+
+
+def refit_on_faces(
+    map_points: np.ndarray,
+    triangles: np.ndarray,
+    params: MapAwareParams,
+    tree: cKDTree | None = None,
+    balls: list | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rule 3's second try (module docstring): the plane of each face's own support.
+
+    For each face of ``triangles`` ``(M, 3, 3)``, start from the face's plane, keep the ``map_points``
+    within ``support_radius_m`` of its centroid and within ``plane_tolerance_m`` of the plane, and fit
+    the plane of those points; ``refit_iterations`` times. Returns each fit's centroid ``(M, 3)``, unit
+    normal ``(M, 3)`` (sign arbitrary) and whether it holds ``(M,)``: at least ``min_support`` points
+    kept, spanning the plane both ways (middle principal variance at least ``plane_tolerance_m``
+    squared), and the face's corners and centroid within ``plane_tolerance_m`` of it. A degenerate face
+    (a point, a line) or one with NaNs does not hold. ``balls``, each face centroid's neighbour list
+    within ``support_radius_m`` when the caller has them already (:func:`fit_planes`), saves the search."""
+    map_points = np.asarray(map_points, float).reshape(-1, 3)
+    triangles = np.asarray(triangles, float).reshape(-1, 3, 3)
+    count = len(triangles)
+    centroid_out, normal_out = np.full((count, 3), np.nan), np.full((count, 3), np.nan)
+    holds = np.zeros(count, bool)
+    if count == 0 or len(map_points) < params.min_support or params.refit_iterations <= 0:
+        return centroid_out, normal_out, holds
+    tolerance = params.plane_tolerance_m
+    centres = triangles.mean(axis=1)
+    cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    length = np.linalg.norm(cross, axis=1)
+    usable = np.flatnonzero(np.isfinite(cross).all(axis=1) & (length > 1e-12))
+    # each ball thinned to FIT_POINTS, as for the first fit
+    if balls is None:
+        tree = tree or cKDTree(map_points)
+        found_in = tree.query_ball_point(centres[usable], params.support_radius_m, return_sorted=False)
+    else:
+        found_in = [balls[row] for row in usable]
+    neighbours = [_thinned(found) for found in found_in]
+    sizes = np.array([len(found) for found in neighbours], int)
+    rows = usable[sizes >= params.min_support]
+    if len(rows) == 0:
+        return centroid_out, normal_out, holds
+    # every face's ball at once, as in fit_planes: each point tagged with its face, as an offset from
+    # the face's centroid
+    fits = len(rows)
+    owner = np.repeat(np.arange(fits), sizes[sizes >= params.min_support])
+    index = np.concatenate([found for found in neighbours if len(found) >= params.min_support])
+    offsets = map_points[index.astype(np.intp)] - centres[rows][owner]
+    centre = np.zeros((fits, 3))  # each plane's point, in those offsets
+    normal = cross[rows] / length[rows, None]
+    alive = np.ones(fits, bool)
+
+    def band(plane_centre, plane_normal):
+        distance = np.abs(np.einsum("ij,ij->i", offsets - plane_centre[owner], plane_normal[owner]))
+        kept = (distance <= tolerance) & alive[owner]
+        count = np.bincount(owner, kept, fits)
+        return distance, kept, count
+
+    def moments(kept, count):
+        weight = kept.astype(float)
+        safe = np.maximum(count, 1.0)
+        mean = np.stack([np.bincount(owner, weight * offsets[:, k], fits) for k in range(3)], axis=1)
+        mean /= safe[:, None]
+        covariance = np.empty((fits, 3, 3))
+        for i in range(3):
+            for j in range(i, 3):
+                moment = np.bincount(owner, weight * offsets[:, i] * offsets[:, j], fits) / safe
+                covariance[:, i, j] = covariance[:, j, i] = moment - mean[:, i] * mean[:, j]
+        covariance[~alive] = np.eye(3)  # no fit: kept out of the eigen-solve's way
+        return mean, covariance
+
+    for _ in range(params.refit_iterations):
+        _, kept, count = band(centre, normal)
+        alive &= count >= params.min_support
+        centre, covariance = moments(kept, count)
+        normal = np.linalg.eigh(covariance)[1][:, :, 0]
+    distance, kept, count = band(centre, normal)
+    alive &= count >= params.min_support
+    centre, covariance = moments(kept, count)
+    values = np.linalg.eigvalsh(covariance)
+    inner = np.bincount(owner, kept & (distance <= 0.5 * tolerance), fits) / np.maximum(count, 1.0)
+    corners = np.concatenate([triangles[rows], centres[rows, None]], axis=1) - centres[rows, None]
+    on_plane = np.abs(np.einsum("nkj,nj->nk", corners - centre[:, None], normal)).max(axis=1) <= tolerance
+    good = alive & (values[:, 1] >= tolerance**2) & (inner >= params.min_band_concentration) & on_plane
+    centroid_out[rows[good]] = centres[rows[good]] + centre[good]
+    normal_out[rows[good]] = normal[good]
+    holds[rows[good]] = True
+    return centroid_out, normal_out, holds
 
 
 def near_teammates(points: np.ndarray, teammates: np.ndarray | None, params: MapAwareParams) -> np.ndarray:
@@ -502,14 +664,18 @@ class MapAwareResult:
     redundant: int
     too_steep: int = 0
     lifted: int = 0
+    refitted: int = 0
+    outside: int = 0
 
     def counts(self) -> dict[str, int]:
         """The candidate counts by rule, for logs and reports."""
         return {
             "candidates": self.candidates,
+            "outside": self.outside,
             "no_support": self.no_support,
             "not_planar": self.not_planar,
             "bridging": self.bridging,
+            "refitted": self.refitted,
             "too_steep": self.too_steep,
             "not_free": self.not_free,
             "lifted": self.lifted,
@@ -625,15 +791,23 @@ def discover_on_map(
         return MapAwareResult(np.zeros((0, 6)), 0, 0, 0, 0, 0, 0)
     good = np.isfinite(triangles).all(axis=(1, 2))
     triangles = triangles[good]
-    centres = triangles.mean(axis=1)
     candidates = len(triangles)
+    outside = 0
+    if params.region_radius_m is not None and params.region_centre is not None:
+        # rule 1: only the structure the robot was sent to inspect
+        offsets = triangles.mean(axis=1) - np.asarray(params.region_centre, float)
+        inside = np.einsum("ij,ij->i", offsets, offsets) <= params.region_radius_m**2
+        outside = int((~inside).sum())
+        triangles = triangles[inside]
+    centres = triangles.mean(axis=1)
     points = robot_map.points()
-    if len(points) == 0 or candidates == 0:
-        return MapAwareResult(np.zeros((0, 6)), candidates, candidates, 0, 0, 0, 0)
+    if len(points) == 0 or len(triangles) == 0:
+        return MapAwareResult(np.zeros((0, 6)), candidates, len(triangles), 0, 0, 0, 0, outside=outside)
     tree = cKDTree(points)
     # rule 2: the local plane at each face
+    balls = tree.query_ball_point(centres, params.support_radius_m, return_sorted=False)
     fit_centre, normal, variation, _ = fit_planes(
-        points, centres, params.support_radius_m, params.min_support, tree
+        points, centres, params.support_radius_m, params.min_support, tree, balls
     )
     supported = np.isfinite(variation) & ~near_teammates(centres, teammates, params)
     # rule 3: planar, and the face on the plane
@@ -644,6 +818,17 @@ def discover_on_map(
         corners = np.concatenate([triangles[rows_planar], centres[rows_planar, None]], axis=1)
         offsets = np.einsum("nkj,nj->nk", corners - fit_centre[rows_planar, None], normal[rows_planar])
         on_plane[rows_planar] = np.abs(offsets).max(axis=1) <= params.plane_tolerance_m
+    not_planar = int((supported & ~planar).sum())
+    bridging = int((planar & ~on_plane).sum())
+    # rule 3's second try: a face in a ball that is not planar, fitted again on its own plane. A face
+    # off a planar ball's plane bridges two surfaces that ball holds, and has no second try
+    retry = np.flatnonzero(supported & ~planar)
+    refit_centre, refit_normal, holds = refit_on_faces(
+        points, triangles[retry], params, tree, [balls[row] for row in retry]
+    )
+    rescued = retry[holds]
+    fit_centre[rescued], normal[rescued] = refit_centre[holds], refit_normal[holds]
+    on_plane[rescued] = True
     # the normal faces the camera that saw the face
     towards = np.asarray(camera_position, float).reshape(3) - centres
     flip = np.einsum("ij,ij->i", normal, towards) < 0
@@ -686,10 +871,12 @@ def discover_on_map(
         final=final,
         candidates=candidates,
         no_support=int((~supported).sum()),
-        not_planar=int((supported & ~planar).sum()),
-        bridging=int((planar & ~on_plane).sum()),
+        not_planar=not_planar - len(rescued),
+        bridging=bridging,
         not_free=int((~free).sum()),
         redundant=redundant_before - len(final),
         too_steep=too_steep,
         lifted=lifted,
+        refitted=len(rescued),
+        outside=outside,
     )

@@ -112,9 +112,11 @@ def test_each_keyframe_reports_what_each_rule_removed(map_aware):
     for event in keyframes:
         rules = event["rules"]
         removed = sum(
-            rules[k] for k in ("no_support", "not_planar", "bridging", "too_steep", "not_free", "redundant")
+            rules[k]
+            for k in ("outside", "no_support", "not_planar", "bridging", "too_steep", "not_free", "redundant")
         )
         assert 0 <= rules["lifted"] <= rules["candidates"]
+        assert 0 <= rules["refitted"] <= rules["candidates"]
         assert removed + rules["final"] == rules["candidates"]
         assert rules["final"] == event["new_tasks"]
 
@@ -240,6 +242,11 @@ def test_each_keyframes_dense_depth_maps_the_walls_where_they_are(tmp_path, dens
     for robot_map in maps.values():
         assert robot_map.params.surface_z == scenario.tank.height
         assert robot_map.params.max_view_pitch_deg == params.max_pitch_deg + params.direction_tolerance_deg
+    # ... and each inspects the region it explores: its exploration radius about where it was launched
+    for spec in scenario.robots:
+        region = maps[spec.name].params
+        assert region.region_radius_m == params.frontier.explore_radius_m
+        assert np.allclose(region.region_centre, spec.position, atol=0.02)
     # with dense candidates a keyframe has more candidates than its mesh has faces; without, as many
     keyframes = [e for e in read_events(tmp_path) if e["kind"] == "keyframe" and "rules" in e]
     assert keyframes

@@ -22,6 +22,7 @@ from maptidal.map_discovery import (
     lift_offsets,
     near_teammates,
     reachable_on_map,
+    refit_on_faces,
 )
 
 NOISE_M = 0.01  # fused landmarks' noise about a wall 1.5 m away (tests below stay far from the gates)
@@ -170,6 +171,147 @@ def test_a_small_face_in_the_crease_is_refused_as_not_planar():
     vertices = np.array([[2.97, 2.0, 0.03], [2.99, 2.1, 0.01], [2.96, 2.05, 0.0]])
     result = discover_on_map(robot_map, vertices, [[0, 1, 2]], camera)
     assert result.not_planar == 1 and len(result.final) == 0
+
+
+def _angle_deg(a, b) -> float:
+    return math.degrees(math.acos(min(1.0, abs(float(np.dot(a, b))))))
+
+
+def _cloud_ball(rng, centre, radius, count):
+    """Points spread evenly through a ball: a cloud with no surface in it."""
+    directions = rng.normal(size=(count, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    return np.asarray(centre, float) + directions * radius * rng.uniform(0, 1, (count, 1)) ** (1 / 3)
+
+
+def test_a_face_on_the_wall_beside_the_floor_is_fitted_again_on_the_wall_alone():
+    rng = np.random.default_rng(31)
+    points, ids, camera = _wall_scene(rng)
+    params = MapAwareParams(min_new_fraction=0.0, min_new_points=1)
+    heights = (0.1, 0.2, 0.3)
+    triangles = np.stack([points[_face_at(points, [3.0, 2.0, z])] for z in heights])
+    # the whole ball holds the floor too: not planar, which is what the second try is for
+    centres = triangles.mean(axis=1)
+    _, _, variation, _ = fit_planes(points, centres, params.support_radius_m, params.min_support)
+    assert (variation > params.max_surface_variation).all()
+    centre, normal, holds = refit_on_faces(points, triangles, params)
+    assert holds.all()
+    for row in range(len(heights)):
+        # the wall's written normal, and a centre on the wall (x = 3) near the face
+        assert _angle_deg(normal[row], [1.0, 0.0, 0.0]) < 5.0
+        assert centre[row, 0] == pytest.approx(3.0, abs=0.02)
+        assert np.linalg.norm(centre[row, 1:] - triangles[row].mean(axis=0)[1:]) < params.support_radius_m
+    # in discovery the faces give level views of the wall, counted as refitted
+    vertices = triangles.reshape(-1, 3)
+    faces = np.arange(len(vertices)).reshape(-1, 3)
+    result = discover_on_map(_map_of(points, ids, camera, params), vertices, faces, camera)
+    assert result.refitted == 3 and result.not_planar == 0 and len(result.final) >= 1
+    for row in result.final:
+        assert _angle_deg(row[3:], [1.0, 0.0, 0.0]) < 5.0 and row[0] == pytest.approx(2.0, abs=0.05)
+    # without the second try they are refused as not planar
+    once = discover_on_map(
+        _map_of(points, ids, camera, replace(params, refit_iterations=0)), vertices, faces, camera
+    )
+    assert once.not_planar == 3 and once.refitted == 0 and len(once.final) == 0
+
+
+def test_the_refit_brings_a_tilted_face_back_to_its_wall():
+    rng = np.random.default_rng(32)
+    points, _, _ = _wall_scene(rng)
+    # a face on the wall whose corners sit 4 cm off it either way: its own plane is tilted by some 20 deg
+    face = np.array([[2.96, 2.0, 0.2], [3.04, 2.15, 0.22], [3.0, 2.05, 0.35]])
+    own = np.cross(face[1] - face[0], face[2] - face[0])
+    assert _angle_deg(own / np.linalg.norm(own), [1.0, 0.0, 0.0]) > 15.0
+    _, normal, holds = refit_on_faces(points, face[None], MapAwareParams())
+    assert holds[0] and _angle_deg(normal[0], [1.0, 0.0, 0.0]) < 5.0
+    # one refit is not enough to get it there
+    _, once, _ = refit_on_faces(points, face[None], MapAwareParams(refit_iterations=1))
+    assert not np.isfinite(once[0]).all() or _angle_deg(once[0], [1.0, 0.0, 0.0]) > _angle_deg(
+        normal[0], [1.0, 0.0, 0.0]
+    )
+
+
+@pytest.mark.parametrize("reach", [0.2, 0.4, 0.6])
+def test_a_face_bridging_the_crease_is_not_fitted_again(reach):
+    rng = np.random.default_rng(33)
+    points, ids, camera = _wall_scene(rng)
+    # corners on the wall at height `reach` and on the floor `reach` out: the centroid in the water
+    bridges = np.array(
+        [
+            [[3.0, 2.0, reach], [3.0 - reach, 2.1, 0.0], [3.0, 2.2, reach]],
+            [[3.0, 2.0, reach], [3.0 - reach, 2.1, 0.0], [3.0 - reach, 2.25, 0.0]],
+        ]
+    )
+    _, _, holds = refit_on_faces(points, bridges, MapAwareParams())
+    assert not holds.any()
+    result = discover_on_map(
+        _map_of(points, ids, camera), bridges.reshape(-1, 3), np.arange(6).reshape(2, 3), camera
+    )
+    assert result.refitted == 0 and len(result.final) == 0
+
+
+def test_a_band_through_a_cloud_is_no_plane():
+    rng = np.random.default_rng(34)
+    cloud = _cloud_ball(rng, [0.0, 0.0, 0.0], 0.5, 3000)
+    face = np.array([[0.0, 0.0, 0.0], [0.0, 0.1, 0.02], [0.01, 0.05, 0.1]])
+    _, _, holds = refit_on_faces(cloud, face[None], MapAwareParams())
+    assert not holds[0]
+    # the band's evenness is what refuses it: without that test the band passes for a plane
+    _, _, loose = refit_on_faces(cloud, face[None], MapAwareParams(min_band_concentration=0.0))
+    assert loose[0]
+
+
+def test_a_line_of_points_is_no_plane_to_fit_again_on():
+    rng = np.random.default_rng(37)
+    # a ladder rail (a line of points along z) in a thin cloud: the ball is not planar, and the band
+    # about a face on the rail holds the rail's points all near the plane, but spread one way only
+    rail = np.column_stack([np.zeros(200), np.zeros(200), np.linspace(-0.5, 0.5, 200)])
+    points = np.vstack([rail, _cloud_ball(rng, [0.0, 0.0, 0.0], 0.5, 60)])
+    face = np.array([[0.0, 0.0, -0.1], [0.0, 0.0, 0.1], [0.0, 0.05, 0.0]])
+    _, _, variation, _ = fit_planes(points, face.mean(axis=0)[None], 0.5, 8)
+    assert variation[0] > MapAwareParams().max_surface_variation
+    _, _, holds = refit_on_faces(points, face[None], MapAwareParams())
+    assert not holds[0]
+    # the band's points are gathered near the plane (the rail lies in it): only their spread, across
+    # the rail a few cloud points' worth, tells the line from a surface
+    band = points[np.abs(points[:, 0]) <= 0.1]
+    assert np.mean(np.abs(band[:, 0]) <= 0.05) >= MapAwareParams().min_band_concentration
+
+
+def test_a_face_off_a_planar_balls_plane_gets_no_second_try():
+    rng = np.random.default_rng(35)
+    wall = _plane_points([3, 0, 0], [0, 1, 0], [0, 0, 1], 4.0, 2.0, 0.1, rng)
+    # a ladder rail 15 cm in front of the wall: a line of points, too few to spoil the wall's flatness
+    rail = np.column_stack([np.full(40, 2.85), np.full(40, 2.5), np.linspace(0.0, 2.0, 40)])
+    points = np.vstack([wall, rail])
+    camera = np.array([1.0, 2.0, 1.0])
+    face = np.array([[2.85, 2.5, 1.0], [3.0, 2.6, 1.0], [2.85, 2.5, 1.2]])
+    _, _, variation, _ = fit_planes(points, face.mean(axis=0)[None], 0.5, 8)
+    assert variation[0] <= MapAwareParams().max_surface_variation
+    result = discover_on_map(_map_of(points, np.arange(len(points)), camera), face, [[0, 1, 2]], camera)
+    assert result.bridging == 1 and result.refitted == 0 and len(result.final) == 0
+
+
+def test_faces_beyond_the_region_to_inspect_yield_no_candidate():
+    rng = np.random.default_rng(36)
+    points, ids, camera = _wall_scene(rng)
+    # the wall at x = 3 from y = 0 to 4; a launch at (1, 0.5, 1) and a 2.5 m region: the face at y = 1 is
+    # 2.06 m away, the one at y = 3 is 3.2 m away (written out: sqrt(2^2 + 0.5^2) and sqrt(2^2 + 2.5^2))
+    near, far = points[_face_at(points, [3.0, 1.0, 1.0])], points[_face_at(points, [3.0, 3.0, 1.0])]
+    vertices, faces = np.vstack([near, far]), [[0, 1, 2], [3, 4, 5]]
+    params = MapAwareParams(min_new_fraction=0.0, min_new_points=1)
+    everywhere = discover_on_map(_map_of(points, ids, camera, params), vertices, faces, camera)
+    assert everywhere.outside == 0 and len(everywhere.final) == 2
+    bounded = replace(params, region_centre=(1.0, 0.5, 1.0), region_radius_m=2.5)
+    result = discover_on_map(_map_of(points, ids, camera, bounded), vertices, faces, camera)
+    assert result.outside == 1 and len(result.final) == 1
+    assert result.final[0, 1] == pytest.approx(1.0, abs=0.1)
+    assert result.counts()["outside"] == 1
+    # a region holding no face leaves nothing to do, and says so
+    none = discover_on_map(
+        _map_of(points, ids, camera, replace(bounded, region_radius_m=0.5)), vertices, faces, camera
+    )
+    assert none.outside == 2 and len(none.final) == 0
 
 
 # ----- rule 4: free space from the robot's own map -----------------------------------------------------
@@ -334,6 +476,16 @@ def test_bad_parameters_are_refused():
         MapAwareParams(min_new_fraction=1.5)
     with pytest.raises(ValueError, match="surface_z"):
         MapAwareParams(surface_z=float("nan"))
+    with pytest.raises(ValueError, match="refit_iterations"):
+        MapAwareParams(refit_iterations=-1)
+    with pytest.raises(ValueError, match="refit_iterations"):
+        MapAwareParams(refit_iterations=1.5)
+    with pytest.raises(ValueError, match="min_band_concentration"):
+        MapAwareParams(min_band_concentration=1.5)
+    with pytest.raises(ValueError, match="region_radius_m"):
+        MapAwareParams(region_radius_m=0.0)
+    with pytest.raises(ValueError, match="region_centre"):
+        MapAwareParams(region_centre=(0.0, float("nan"), 0.0))
 
 
 def test_a_lost_pose_or_nan_landmarks_carve_nothing_and_are_skipped():

@@ -9,6 +9,8 @@
     relocalise = true      # a robot without a DVL relocalises against its own map (false: it does not)
     command_rate_hz = 10.0 # go-to-pose's pilot commands per second
     clearance_m = 1.0      # how far a robot keeps from lower-indexed teammates (0: not at all)
+    lost_after_s = 3.0     # a robot without a DVL is lost after this long without a visual fix ...
+    lost_sigma_m = 0.15    # ... or when more unsure of its position than this
     render_samples = 4     # the images' anti-aliasing samples (0: off, about twice as fast on a CPU)
     perception_process = true  # perception and discovery in a worker process (false: inline, slower)
     water_backend = "prefer-gl"  # where the water model runs: prefer-gl, gl, cpu or auto (Simulation's)
@@ -66,6 +68,8 @@ MISSION_KEYS = {
     "relocalise",
     "command_rate_hz",
     "clearance_m",
+    "lost_after_s",
+    "lost_sigma_m",
     "render_samples",
     "perception_process",
     "water_backend",

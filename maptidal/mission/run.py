@@ -288,6 +288,8 @@ class MissionParams:
             )
         if not (math.isfinite(self.motion_model_error) and 0 <= self.motion_model_error < 1):
             raise ValueError(f"motion_model_error must be in [0, 1), got {self.motion_model_error!r}")
+        if not (math.isfinite(self.lost_after_s) and self.lost_after_s > 0):
+            raise ValueError(f"lost_after_s must be positive, got {self.lost_after_s!r}")
         if not (math.isfinite(self.lost_sigma_m) and self.lost_sigma_m > 0):
             raise ValueError(f"lost_sigma_m must be positive, got {self.lost_sigma_m!r}")
         if not (math.isfinite(self.stall_s) and self.stall_s >= 0 and math.isfinite(self.stall_move_m)):
@@ -547,8 +549,10 @@ class Mission:
         self.robots_by_index: dict[int, _Robot] = {}
         profiles, joining = [], []
         fronts: dict[str, FrontEnd] = {}  # each robot's front end, handed to the perception worker
+        launches: dict[str, np.ndarray] = {}  # where each starts (or parks), its estimator's origin
         for index, spec in enumerate(self.scenario.robots):
             truth = self.sim.ground_truth(spec.name)
+            launches[spec.name] = np.asarray(truth["position"], float)
             profile = RobotProfile(spec.name, index, np.asarray(truth["position"]), speed=params.speed_m_s)
             if spec.name in joins:
                 joining.append(AuctionEvent(joins[spec.name], "join", profile=profile))
@@ -598,7 +602,17 @@ class Mission:
             map_params = dataclasses.replace(
                 params.map_aware, surface_z=self.scenario.tank.height, max_view_pitch_deg=min(steepest, 90.0)
             )
-            maps = {name: RobotMap(map_params) for name in fronts}
+            # each robot inspects the region it explores: within the exploration radius of its launch
+            maps = {
+                name: RobotMap(
+                    dataclasses.replace(
+                        map_params,
+                        region_centre=tuple(float(c) for c in launches[name]),
+                        region_radius_m=params.frontier.explore_radius_m,
+                    )
+                )
+                for name in fronts
+            }
         self.perception.configure(fronts, params.discovery, maps)
         # the robots' cameras render on a thread of their own, beside the physics (MuJoCo lets go of
         # Python's lock while it draws): the renderer, and its GL context, are made there, and every draw

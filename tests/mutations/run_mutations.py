@@ -1020,6 +1020,76 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             )
         ],
     ),
+    "D21": (
+        "no second try for a face whose ball is not planar",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "    retry = np.flatnonzero(supported & ~planar)\n",
+                "    retry = np.flatnonzero(np.zeros_like(supported))\n",
+            )
+        ],
+    ),
+    "D22": (
+        "the refitted plane not asked to gather its points near it",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "& (inner >= params.min_band_concentration)",
+                "& (inner >= 0.0)",
+            )
+        ],
+    ),
+    "D23": (
+        "the refitted plane not asked to span both ways",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "(values[:, 1] >= tolerance**2)",
+                "(values[:, 1] >= 0.0)",
+            )
+        ],
+    ),
+    "D24": (
+        "a face off a planar ball's plane fitted again too",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "    retry = np.flatnonzero(supported & ~planar)\n",
+                "    retry = np.flatnonzero(supported & ~(planar & on_plane))\n",
+            )
+        ],
+    ),
+    "D25": (
+        "the refit's plane kept from the face's own, not refitted",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "        normal = np.linalg.eigh(covariance)[1][:, :, 0]\n",
+                "",
+            )
+        ],
+    ),
+    "D26": (
+        "faces beyond the region to inspect kept",
+        [
+            (
+                "maptidal/map_discovery.py",
+                '        inside = np.einsum("ij,ij->i", offsets, offsets) <= params.region_radius_m**2\n',
+                "        inside = np.ones(len(offsets), bool)\n",
+            )
+        ],
+    ),
+    "D27": (
+        "the robots' maps not told the region they explore",
+        [
+            (
+                "maptidal/mission/run.py",
+                "                        region_radius_m=params.frontier.explore_radius_m,\n",
+                "",
+            )
+        ],
+    ),
     "P1": (
         "a baseline's viewpoints out of the reach band left out, not moved into it",
         [
