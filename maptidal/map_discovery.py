@@ -281,6 +281,7 @@ FIT_POINTS = 256
 
 
 def _thinned(found: list[int]) -> list[int]:
+    """At most FIT_POINTS of a ball's neighbour list, every k-th."""
     return found[:: -(-len(found) // FIT_POINTS)] if len(found) > FIT_POINTS else found
 
 
@@ -310,9 +311,8 @@ def fit_planes(
         return out_centroid, out_normal, out_variation, support
     if balls is None:
         balls = (tree or cKDTree(map_points)).query_ball_point(centres, radius, return_sorted=False)
-    neighbours = balls
-    support[:] = [len(found) for found in neighbours]
-    neighbours = [_thinned(found) for found in neighbours]
+    support[:] = [len(found) for found in balls]
+    neighbours = [_thinned(found) for found in balls]
     rows = np.flatnonzero(support >= min_support)
     if len(rows) == 0:
         return out_centroid, out_normal, out_variation, support
@@ -352,7 +352,8 @@ def refit_on_faces(
     the plane of those points; ``refit_iterations`` times. Returns each fit's centroid ``(M, 3)``, unit
     normal ``(M, 3)`` (sign arbitrary) and whether it holds ``(M,)``: at least ``min_support`` points
     kept, spanning the plane both ways (middle principal variance at least ``plane_tolerance_m``
-    squared), and the face's corners and centroid within ``plane_tolerance_m`` of it. A degenerate face
+    squared), gathered near it (``min_band_concentration`` of them within half the tolerance), and the
+    face's corners and centroid within ``plane_tolerance_m`` of it. A degenerate face
     (a point, a line) or one with NaNs does not hold. ``balls``, each face centroid's neighbour list
     within ``support_radius_m`` when the caller has them already (:func:`fit_planes`), saves the search."""
     map_points = np.asarray(map_points, float).reshape(-1, 3)
