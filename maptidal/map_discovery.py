@@ -285,6 +285,24 @@ def _thinned(found: list[int]) -> list[int]:
     return found[:: -(-len(found) // FIT_POINTS)] if len(found) > FIT_POINTS else found
 
 
+def _group_moments(
+    owner: np.ndarray, offsets: np.ndarray, groups: int, weight: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The (weighted) mean ``(G, 3)`` and covariance ``(G, 3, 3)`` of the ``offsets`` of each group,
+    ``owner`` giving each row's group: every group at once, by bincount. A group of no weight gets a
+    zero mean and covariance."""
+    weight = np.ones(len(owner)) if weight is None else np.asarray(weight, float)
+    total = np.maximum(np.bincount(owner, weight, groups), 1e-300)
+    mean = np.stack([np.bincount(owner, weight * offsets[:, k], groups) for k in range(3)], axis=1)
+    mean /= total[:, None]
+    covariance = np.empty((groups, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            moment = np.bincount(owner, weight * offsets[:, i] * offsets[:, j], groups) / total
+            covariance[:, i, j] = covariance[:, j, i] = moment - mean[:, i] * mean[:, j]
+    return mean, covariance
+
+
 def fit_planes(
     map_points: np.ndarray,
     centres: np.ndarray,
@@ -322,13 +340,7 @@ def fit_planes(
     owner = np.repeat(np.arange(len(rows)), fitted)
     index = np.concatenate([neighbours[row] for row in rows]).astype(np.intp)
     offsets = map_points[index] - centres[rows][owner]
-    count = fitted.astype(float)
-    mean = np.stack([np.bincount(owner, offsets[:, k], len(rows)) for k in range(3)], axis=1) / count[:, None]
-    covariance = np.empty((len(rows), 3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            moment = np.bincount(owner, offsets[:, i] * offsets[:, j], len(rows)) / count
-            covariance[:, i, j] = covariance[:, j, i] = moment - mean[:, i] * mean[:, j]
+    mean, covariance = _group_moments(owner, offsets, len(rows))
     values, vectors = np.linalg.eigh(covariance)
     total = values.sum(axis=1)
     out_centroid[rows] = centres[rows] + mean
@@ -358,10 +370,9 @@ def refit_on_faces(
     within ``support_radius_m`` when the caller has them already (:func:`fit_planes`), saves the search."""
     map_points = np.asarray(map_points, float).reshape(-1, 3)
     triangles = np.asarray(triangles, float).reshape(-1, 3, 3)
-    count = len(triangles)
-    centroid_out, normal_out = np.full((count, 3), np.nan), np.full((count, 3), np.nan)
-    holds = np.zeros(count, bool)
-    if count == 0 or len(map_points) < params.min_support or params.refit_iterations <= 0:
+    centroid_out, normal_out = np.full((len(triangles), 3), np.nan), np.full((len(triangles), 3), np.nan)
+    holds = np.zeros(len(triangles), bool)
+    if len(triangles) == 0 or len(map_points) < params.min_support or params.refit_iterations <= 0:
         return centroid_out, normal_out, holds
     tolerance = params.plane_tolerance_m
     centres = triangles.mean(axis=1)
@@ -395,27 +406,19 @@ def refit_on_faces(
         count = np.bincount(owner, kept, fits)
         return distance, kept, count
 
-    def moments(kept, count):
-        weight = kept.astype(float)
-        safe = np.maximum(count, 1.0)
-        mean = np.stack([np.bincount(owner, weight * offsets[:, k], fits) for k in range(3)], axis=1)
-        mean /= safe[:, None]
-        covariance = np.empty((fits, 3, 3))
-        for i in range(3):
-            for j in range(i, 3):
-                moment = np.bincount(owner, weight * offsets[:, i] * offsets[:, j], fits) / safe
-                covariance[:, i, j] = covariance[:, j, i] = moment - mean[:, i] * mean[:, j]
+    def moments(kept):
+        mean, covariance = _group_moments(owner, offsets, fits, kept)
         covariance[~alive] = np.eye(3)  # no fit: kept out of the eigen-solve's way
         return mean, covariance
 
     for _ in range(params.refit_iterations):
         _, kept, count = band(centre, normal)
         alive &= count >= params.min_support
-        centre, covariance = moments(kept, count)
+        centre, covariance = moments(kept)
         normal = np.linalg.eigh(covariance)[1][:, :, 0]
     distance, kept, count = band(centre, normal)
     alive &= count >= params.min_support
-    centre, covariance = moments(kept, count)
+    centre, covariance = moments(kept)
     values = np.linalg.eigvalsh(covariance)
     inner = np.bincount(owner, kept & (distance <= 0.5 * tolerance), fits) / np.maximum(count, 1.0)
     corners = np.concatenate([triangles[rows], centres[rows, None]], axis=1) - centres[rows, None]

@@ -553,7 +553,7 @@ class Mission:
         for index, spec in enumerate(self.scenario.robots):
             truth = self.sim.ground_truth(spec.name)
             launches[spec.name] = np.asarray(truth["position"], float)
-            profile = RobotProfile(spec.name, index, np.asarray(truth["position"]), speed=params.speed_m_s)
+            profile = RobotProfile(spec.name, index, launches[spec.name], speed=params.speed_m_s)
             if spec.name in joins:
                 joining.append(AuctionEvent(joins[spec.name], "join", profile=profile))
             else:
@@ -588,7 +588,7 @@ class Mission:
             robot.next_frame_s = robot.frame_every_s * index / len(self.scenario.robots)
             if spec.name in joins:
                 robot.activity = "waiting"
-                robot.launch = (np.asarray(truth["position"], float), float(truth["rpy"][2]))
+                robot.launch = (launches[spec.name], float(truth["rpy"][2]))
         channel = dataclasses.replace(params.channel, outages=params.channel.outages + outages)
         self.auction = AuctionSimulation(profiles, [], channel, AuctionParams(), params.agent, events=joining)
         self.writer = MissionWriter(out_dir)
