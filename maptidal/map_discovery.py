@@ -15,9 +15,12 @@ it) and adds five rules, each with its reason:
    no structure: landmarks and faces about where its last acoustic message put it are left out. Nor is
    the water surface, which the dense depth maps from below: dense points within ``SURFACE_BAND_M``
    (15 cm, the stereo depth error at the 3 m the dense depth reaches) of the depth sensor's datum
-   ``surface_z`` are left out. Nor is structure beyond the region the robot was sent to inspect: faces
-   farther than ``region_radius_m`` from ``region_centre`` (in the loop, the robot's launch point and
-   its exploration radius) yield no candidate; a glimpse down a long wall is not a task.
+   ``surface_z``, or above it, are left out, but for the top of a wall that rises into that band: a
+   band point with a point of the 15 cm beneath the band within ``wall_reach_m`` of it horizontally
+   is a wall's (:func:`water_surface`). Nor is structure beyond the region the robot was sent to
+   inspect: faces farther than ``region_radius_m`` from ``region_centre`` (in the loop, the robot's
+   launch point and its exploration radius) yield no candidate; a glimpse down a long wall is not a
+   task.
 2. **Normals from local surface fits.** A face's normal is the smallest principal axis of the map points
    within ``support_radius_m`` of its centroid (the least-squares plane, as in Hoppe et al. 1992,
    "Surface reconstruction from unorganized points"), turned to face the camera that saw the face. One
@@ -62,6 +65,10 @@ it) and adds five rules, each with its reason:
    covered, until no candidate adds ``min_new_fraction`` of its own view and ``min_new_points`` points.
    The 0.3 mirrors the paper's confirmation threshold: there a view that holds 75 % of a keyframe's
    keypoints stands for it; here a view that adds under 30 % of its footprint is all but a repeat.
+   But not when its own face (the point it looks at from the standoff) is in no view yet, the known
+   tasks' or those the cover took: then ``min_new_points`` suffice. A face at the top or the foot of a
+   wall has its view lifted away from it (rule 4), and adds only the strip its neighbours' frames stop
+   short of, a small share of its footprint; yet no other view holds that face.
    Occlusion is not modelled in this count.
 
 Candidates come from the keyframe mesh's faces and, with ``dense_candidates_m`` above 0 (off by
@@ -101,6 +108,7 @@ __all__ = [
     "refit_on_faces",
     "unpack_voxels",
     "voxel_keys",
+    "water_surface",
 ]
 
 
@@ -175,6 +183,11 @@ class MapAwareParams:
     # observation's depth error at 1.8 m) leaves 0.68 or more there; a band that cuts a surface at an
     # angle (a bridging face's plane across a crease), or a cloud, is filled evenly, 0.5
     min_band_concentration: float = 2.0 / 3.0
+    # how near, horizontally, a dense point in the water surface's band must lie to one in the 15 cm
+    # beneath the band to be taken for a wall's top (water_surface): the dense depth's scatter across a
+    # wall seen at 2 m, its depth error there (6.8 cm, above), fits within it. Along the walls' tops a
+    # lip of the surface this wide is kept too (0: the whole band left out)
+    wall_reach_m: float = 0.1
     # the steepest view the team can fly, in degrees up or down from level (None: not checked): the
     # mission sets its robots' largest pitch for a view plus the direction tolerance a view is judged
     # by, since a robot declines a view it cannot pitch to (maptidal.mission.verification.pitch_to_fly)
@@ -211,6 +224,7 @@ class MapAwareParams:
             "teammate_speed_m_s",
             "teammate_max_radius_m",
             "dense_candidates_m",
+            "wall_reach_m",
         ):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
@@ -252,6 +266,27 @@ class MapAwareParams:
 
 
 SURFACE_BAND_M = 0.15
+
+
+def water_surface(points: np.ndarray, surface_z: float, wall_reach_m: float) -> np.ndarray:
+    """Which of the dense depth's ``points`` ``(N, 3)`` are the water surface seen from below: those
+    within ``SURFACE_BAND_M`` of ``surface_z`` (the depth error at the 3 m the dense depth reaches) or
+    above it, but for those on a wall that rises into the band. A wall goes on below the band; the
+    surface has open water beneath it. So a band point under the datum with one of the same points in
+    the ``SURFACE_BAND_M`` just below the band within ``wall_reach_m`` of it horizontally is a wall's,
+    and kept: the top 15 cm of the walls, which the band would otherwise leave out of the map, and so
+    out of rule 5's count of what is still to be seen. Points over the datum are the surface's mirror
+    image of the tank, never structure."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    band = points[:, 2] >= surface_z - SURFACE_BAND_M
+    maybe_wall = np.flatnonzero(band & (points[:, 2] < surface_z))
+    beneath = points[~band & (points[:, 2] >= surface_z - 2.0 * SURFACE_BAND_M)]
+    if len(maybe_wall) == 0 or len(beneath) == 0 or wall_reach_m <= 0:
+        return band
+    nearest, _ = cKDTree(beneath[:, :2]).query(points[maybe_wall, :2], distance_upper_bound=wall_reach_m)
+    surface = band.copy()
+    surface[maybe_wall[np.isfinite(nearest)]] = False  # no neighbour in reach: an infinite distance
+    return surface
 
 
 def voxel_keys(points: np.ndarray, size: float) -> np.ndarray:
@@ -543,8 +578,7 @@ class RobotMap:
         self._carve(camera, points)
         points = points[~near_teammates(points, teammates, self.params)]
         if self.params.surface_z is not None:
-            # the water surface, seen from below, is no structure (its depth error: look_range_m's 15 cm)
-            points = points[points[:, 2] < self.params.surface_z - SURFACE_BAND_M]
+            points = points[~water_surface(points, self.params.surface_z, self.params.wall_reach_m)]
         keys = _packed(voxel_keys(points, self.params.coverage_voxel_m)).tolist()
         self._stacked = None
         for key, point in zip(keys, points, strict=True):
@@ -848,8 +882,10 @@ def discover_on_map(
         too_steep = int((~flyable).sum())
         rows = rows[flyable]
     # ... in water the robot has seen, moved up or down into it if need be
+    # each view's own face: where it looks from the standoff, before the lift moves it
+    looked_at = rows[:, :3] + discovery.standoff * rows[:, 3:]
     rows, free, lifted = lift_into_free(robot_map, rows, discovery, tree)
-    rows = rows[free]
+    rows, looked_at = rows[free], looked_at[free]
     # rule 5: a greedy cover of the map's cells, the known tasks' views counting as covered
     redundant_before = len(rows)
     final = np.zeros((0, 6))
@@ -860,16 +896,23 @@ def discover_on_map(
         covered = _covered(existing_rows, cells, camera) if len(existing_rows) else np.zeros(len(cells), bool)
         sees = np.stack(list(frustum_masks(rows, cells, camera)))
         footprint = sees.sum(axis=1)
+        # a face no view holds yet: its candidate is kept for less than min_new_fraction
+        face_in_view = np.stack(list(frustum_masks(rows, looked_at, camera)))
+        face_seen = np.zeros(len(rows), bool)
+        if len(existing_rows):
+            face_seen = _covered(existing_rows, looked_at, camera)
         chosen: list[int] = []
         while True:
             new = (sees & ~covered).sum(axis=1)
             fraction = np.where(footprint > 0, new / np.maximum(footprint, 1), 0.0)
-            eligible = (new >= params.min_new_points) & (fraction >= params.min_new_fraction)
+            needed = (fraction >= params.min_new_fraction) | ~face_seen
+            eligible = (new >= params.min_new_points) & needed
             if not eligible.any():
                 break
             best = int(np.argmax(np.where(eligible, new, -1)))
             chosen.append(best)
             covered |= sees[best]
+            face_seen |= face_in_view[best]
         final = rows[chosen]
     return MapAwareResult(
         final=final,

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from mission_helpers import mission_at_rest
 
 from maptidal.controllers.estimation import MotionModel
 from maptidal.controllers.trajectory import PoseTrajectory, Route
@@ -17,16 +18,8 @@ from maptidal.mission.outputs import read_events
 from maptidal.mission.run import Mission, MissionParams
 
 
-def _close(mission: Mission) -> None:
-    mission.perception.close()
-    mission._gl.submit(mission.sim.close).result()
-    mission._gl.shutdown()
-
-
 def test_an_unsure_robot_goes_home_and_is_found_again_only_when_sure(tmp_path):
-    scenario, _ = load_mission(None)
-    mission = Mission(scenario, MissionParams(duration_s=10.0, plots=False), tmp_path)
-    try:
+    with mission_at_rest(tmp_path, duration_s=10.0) as (mission, _):
         robot = mission.robots["rov1"]  # the robot without a DVL
         assert not robot.has_dvl
         mission._start_exploring(robot, 0.0)
@@ -59,8 +52,6 @@ def test_an_unsure_robot_goes_home_and_is_found_again_only_when_sure(tmp_path):
         robot.position_sigma_m = 0.01
         assert mission._lost(robot, 3.0 + mission.params.lost_after_s + 0.1)  # no fix for too long
         assert not mission._lost(mission.robots["rov0"], 100.0)  # a DVL robot is never lost
-    finally:
-        _close(mission)
     kinds = [e["kind"] for e in read_events(tmp_path) if e.get("robot") == "rov1"]
     assert kinds == ["position_lost", "position_regained", "position_lost"]
 
@@ -69,10 +60,7 @@ def test_a_robot_that_lost_its_fix_is_found_again_at_its_next_sure_fix(tmp_path)
     # the halved limit is for a robot lost as unsure: one that went without a fix while 8 cm sure of
     # itself (as the default mission's robot without a DVL is) waited for many fixes to halve a limit it
     # never passed
-    scenario, _ = load_mission(None)
-    mission = Mission(scenario, MissionParams(duration_s=10.0, plots=False), tmp_path)
-    params = mission.params
-    try:
+    with mission_at_rest(tmp_path, duration_s=10.0) as (mission, params):
         robot = mission.robots["rov1"]
         mission._start_exploring(robot, 0.0)
         home = robot.home_position.copy()
@@ -90,11 +78,68 @@ def test_a_robot_that_lost_its_fix_is_found_again_at_its_next_sure_fix(tmp_path)
         assert mission._lost(robot, lost_at + 2.0 + params.lost_after_s)
         robot.visual_updates, robot.position_sigma_m = 3, params.lost_sigma_m + 0.01
         assert mission._lost(robot, lost_at + 3.0 + params.lost_after_s)
-    finally:
-        _close(mission)
     lost = [e for e in read_events(tmp_path) if e["kind"] == "position_lost"]
     assert [e["why"] for e in lost] == ["no_fix", "no_fix"]
     assert lost[0]["sigma_m"] == pytest.approx(0.08) and lost[0]["unfixed_s"] > params.lost_after_s
+
+
+def _lose_twice_on_the_way(mission: Mission, params: MissionParams):
+    """The robot without a DVL, given a view, flies to it and is lost twice on the way (found again
+    between). Returns the robot, its agent and the task."""
+    robot = mission.robots["rov1"]
+    agent = mission.auction.agents[robot.index]
+    mission._start_exploring(robot, 0.0)
+    task = agent.discover_task([-1.0, -0.6, 1.0], [1.0, 0.0, 0.0], now_s=0.0)
+    agent.build_bundle(0.0)
+    assert agent.path_keys() == [task.key]
+    robot.activity = "idle"
+    mission._advance_activity(robot, 1.0)
+    assert robot.activity == "fly" and robot.task_key == task.key and robot.task_losses == 0
+    robot.visual_updates, robot.position_sigma_m = 1, 0.08
+    assert not mission._lost(robot, 1.0)
+    first = 1.0 + params.lost_after_s + 0.1
+    assert mission._lost(robot, first) and robot.task_losses == 1
+    robot.visual_updates = 2
+    assert not mission._lost(robot, first + 1.0)
+    mission._advance_activity(robot, first + 1.0)
+    assert robot.activity == "fly"  # once: it flies on
+    second = first + 1.0 + params.lost_after_s + 0.1
+    assert mission._lost(robot, second) and robot.task_losses == 2
+    mission._advance_activity(robot, second)
+    return robot, agent, task, second
+
+
+def test_a_robot_lost_twice_on_its_way_to_a_view_gives_the_view_up(tmp_path):
+    # lost a second time on the way to the same view, the robot gives the view up for a teammate to win
+    with mission_at_rest(tmp_path, duration_s=10.0, lost_give_up=2) as (mission, params):
+        robot, agent, task, second = _lose_twice_on_the_way(mission, params)
+        assert robot.activity == "idle" and task.key in robot.skipped
+        assert task.key not in agent.path_keys()
+        # lost while not flying to a view (exploring, idle) counts against no view
+        robot.visual_updates = 3
+        assert not mission._lost(robot, second + 1.0)
+        assert mission._lost(robot, second + 2.0 + params.lost_after_s) and robot.task_losses == 2
+        # its next view starts with none counted
+        other = agent.discover_task([-1.0, 0.2, 1.0], [1.0, 0.0, 0.0], now_s=second)
+        agent.build_bundle(second)
+        robot.visual_updates = 4
+        assert not mission._lost(robot, second + 3.0 + params.lost_after_s)
+        mission._advance_activity(robot, second + 3.0 + params.lost_after_s)
+        assert robot.activity == "fly" and robot.task_key == other.key and robot.task_losses == 0
+    gave_up = [e for e in read_events(tmp_path) if e["kind"] == "gave_up"]
+    assert [(e["robot"], e["task"], e["lost"]) for e in gave_up] == [("rov1", task.key, 2)]
+    for bad in (-1, 1.5):
+        with pytest.raises(ValueError, match="lost_give_up"):
+            MissionParams(lost_give_up=bad)
+
+
+def test_by_default_a_robot_lost_on_its_way_flies_on_to_the_view(tmp_path):
+    # lost_give_up is 0 by default: never given up for being lost (README, "Without a DVL", says why)
+    with mission_at_rest(tmp_path, duration_s=10.0) as (mission, params):
+        assert params.lost_give_up == 0
+        robot, agent, task, _ = _lose_twice_on_the_way(mission, params)
+        assert robot.activity == "fly" and task.key in agent.path_keys()
+    assert not [e for e in read_events(tmp_path) if e["kind"] == "gave_up"]
 
 
 def test_a_perturbed_motion_model_is_heavier_and_less_damped():

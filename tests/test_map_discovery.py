@@ -23,6 +23,7 @@ from maptidal.map_discovery import (
     near_teammates,
     reachable_on_map,
     refit_on_faces,
+    water_surface,
 )
 
 NOISE_M = 0.01  # fused landmarks' noise about a wall 1.5 m away (tests below stay far from the gates)
@@ -459,6 +460,39 @@ def test_a_view_the_known_tasks_already_cover_is_dropped_and_a_new_one_kept():
     assert again.sum() < 0.3 * _sees(first, cells, discovery).sum()
 
 
+def test_a_face_at_the_top_of_the_wall_that_no_view_holds_gets_its_view_though_it_adds_a_strip():
+    # the wall of _low_and_high_faces, up to the surface at z = 2; a known task looks at it level from
+    # 1 m at z = 1.35, so its frame reaches z = 1.35 + tan(27.05 deg) = 1.86 on the wall. A face at the
+    # top (about z = 1.93) has its viewpoint lifted to 1.65 at most (the surface's 35 cm clearance): that
+    # view's new cells are the strip over 1.86, under 30 % of its footprint, but the face is in no view
+    rng = np.random.default_rng(21)
+    points, camera, _, _ = _low_and_high_faces(rng)
+    discovery = DiscoveryParams()
+    params = MapAwareParams(surface_z=2.0)
+    robot_map = _map_of(points, np.arange(len(points)), camera, params)
+    vertices = points[_face_at(points, [3.0, 3.0, 1.95])]
+    face = vertices.mean(axis=0)
+    known = np.array([[2.0, 3.0, 1.35, 1.0, 0.0, 0.0]])
+    result = discover_on_map(robot_map, vertices, [[0, 1, 2]], camera, existing=known)
+    assert len(result.final) == 1 and result.lifted == 1
+    top = result.final[0]
+    assert 1.55 <= top[2] <= 1.65 + 1e-9
+    # brute force: the strip is under min_new_fraction of the view's footprint, the face outside the
+    # known view and inside the new one
+    cells = (np.unique(np.floor(points / 0.1), axis=0) + 0.5) * 0.1
+    footprint = _sees(top, cells, discovery)
+    strip = footprint & ~_sees(known[0], cells, discovery)
+    assert params.min_new_points <= strip.sum() < params.min_new_fraction * footprint.sum()
+    assert not _sees(known[0], face[None], discovery)[0] and _sees(top, face[None], discovery)[0]
+    # a known view that holds the face leaves out the view of the strip it still adds: all but a repeat
+    higher = np.array([[2.0, 3.0, 1.45, 1.0, 0.0, 0.0]])
+    assert _sees(higher[0], face[None], discovery)[0]
+    still_new = footprint & ~_sees(higher[0], cells, discovery)
+    assert params.min_new_points <= still_new.sum() < params.min_new_fraction * footprint.sum()
+    again = discover_on_map(robot_map, vertices, [[0, 1, 2]], camera, existing=higher)
+    assert len(again.final) == 0 and again.redundant == 1
+
+
 def test_two_candidates_on_one_patch_give_one_task():
     rng = np.random.default_rng(9)
     points, ids, camera = _wall_scene(rng)
@@ -633,6 +667,35 @@ def test_the_water_surface_seen_from_below_is_no_structure():
     unknown = RobotMap(MapAwareParams())
     unknown.add_surface(camera, np.vstack([surface, wall]))
     assert len(unknown.points()) > 10
+
+
+def test_the_top_of_a_wall_that_rises_into_the_surface_band_stays_in_the_map():
+    # dense depth of a wall at x = 3 (jittered 4 cm across it) up to the datum z = 2.0; of the surface
+    # from below at z = 1.97 over open water 0.2 m and more from the wall; of the surface at the wall's
+    # foot, 5 cm from it (the lip a 10 cm reach keeps); and of the surface's mirror image over the datum
+    rng = np.random.default_rng(5)
+    ys, zs = np.meshgrid(np.arange(0.0, 2.0, 0.05), np.arange(1.0, 1.99, 0.05))
+    wall = np.column_stack([3.0 + rng.uniform(-0.04, 0.04, ys.size), ys.ravel(), zs.ravel()])
+    xs, ys2 = np.meshgrid(np.arange(1.0, 2.81, 0.1), np.arange(0.0, 2.0, 0.1))
+    surface = np.column_stack([xs.ravel(), ys2.ravel(), np.full(xs.size, 1.97)])
+    lip = np.column_stack([np.full(5, 2.95), np.linspace(0.2, 1.8, 5), np.full(5, 1.98)])
+    mirror = np.column_stack([np.full(5, 3.0), np.linspace(0.2, 1.8, 5), np.full(5, 2.05)])
+    points = np.vstack([wall, surface, lip, mirror])
+    dropped = water_surface(points, 2.0, wall_reach_m=0.1)
+    assert (wall[:, 2] >= 1.85).sum() == 3 * 40  # the wall's top 15 cm: z 1.85 to 1.95 ...
+    assert not dropped[: len(wall)].any()  # ... kept, with all the rest of it
+    assert dropped[len(wall) : len(wall) + len(surface)].all()
+    assert not dropped[len(wall) + len(surface) : -5].any()  # the lip, within reach
+    assert dropped[-5:].all()  # over the datum, though right over the wall
+    # no reach: the whole band goes, as before
+    assert np.array_equal(water_surface(points, 2.0, wall_reach_m=0.0), points[:, 2] >= 1.85)
+    # a wall that stops 20 cm under the band gives the band no support
+    low = wall[wall[:, 2] <= 1.65]
+    assert water_surface(np.vstack([low, lip]), 2.0, wall_reach_m=0.1)[len(low) :].all()
+    # through the map: the wall's top is kept, the surface is not
+    robot_map = RobotMap(MapAwareParams(surface_z=2.0))
+    taken = robot_map.add_surface(np.array([1.0, 1.0, 1.0]), np.vstack([wall, surface, mirror]))
+    np.testing.assert_array_equal(taken, wall)
 
 
 # ----- rule 4's lift: a viewpoint moved up or down into water the robot can hold --------------------------

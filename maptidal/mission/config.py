@@ -11,6 +11,7 @@
     clearance_m = 1.0      # how far a robot keeps from lower-indexed teammates (0: not at all)
     lost_after_s = 3.0     # a robot without a DVL is lost after this long without a visual fix ...
     lost_sigma_m = 0.15    # ... or when more unsure of its position than this
+    lost_give_up = 0       # a robot lost this many times on its way to one view gives it up (0: never)
     render_samples = 4     # the images' anti-aliasing samples (0: off, about twice as fast on a CPU)
     perception_process = true  # perception and discovery in a worker process (false: inline, slower)
     water_backend = "prefer-gl"  # where the water model runs: prefer-gl, gl, cpu or auto (Simulation's)
@@ -70,6 +71,7 @@ MISSION_KEYS = {
     "clearance_m",
     "lost_after_s",
     "lost_sigma_m",
+    "lost_give_up",
     "render_samples",
     "perception_process",
     "water_backend",

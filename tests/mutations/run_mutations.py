@@ -466,6 +466,30 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             )
         ],
     ),
+    "L14": (
+        "a robot's losses on the way to a view never counted",
+        [("maptidal/mission/run.py", '                robot.task_losses += robot.activity == "fly"\n', "")],
+    ),
+    "L15": (
+        "a robot's losses counted against its view whatever it was doing",
+        [
+            (
+                "maptidal/mission/run.py",
+                '                robot.task_losses += robot.activity == "fly"\n',
+                "                robot.task_losses += 1\n",
+            )
+        ],
+    ),
+    "L16": (
+        "the count of losses not started afresh at a new view",
+        [
+            (
+                "maptidal/mission/run.py",
+                "            robot.within_since_s, robot.still_at, robot.task_losses = None, None, 0\n",
+                "            robot.within_since_s, robot.still_at = None, None\n",
+            )
+        ],
+    ),
     "S1": (
         "a robot's own discoveries leave newest first",
         [
@@ -1087,6 +1111,86 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "maptidal/mission/run.py",
                 "                        region_radius_m=params.frontier.explore_radius_m,\n",
                 "",
+            )
+        ],
+    ),
+    "D28": (
+        "any band point taken for a wall's, near a point beneath the band or not",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "    surface[maybe_wall[np.isfinite(nearest)]] = False",
+                "    surface[maybe_wall] = False",
+            )
+        ],
+    ),
+    "D29": (
+        "points over the water surface's datum taken for a wall's top",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "    maybe_wall = np.flatnonzero(band & (points[:, 2] < surface_z))",
+                "    maybe_wall = np.flatnonzero(band)",
+            )
+        ],
+    ),
+    "D30": (
+        "the map's dense depth not told the wall's reach (the whole band left out)",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "points[~water_surface(points, self.params.surface_z, self.params.wall_reach_m)]",
+                "points[~water_surface(points, self.params.surface_z, 0.0)]",
+            )
+        ],
+    ),
+    "D31": (
+        "the band's support sought anywhere beneath it, not in the 15 cm just under it",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "    beneath = points[~band & (points[:, 2] >= surface_z - 2.0 * SURFACE_BAND_M)]",
+                "    beneath = points[~band]",
+            )
+        ],
+    ),
+    "D32": (
+        "rule 5 without its exception for a face no view holds",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "            needed = (fraction >= params.min_new_fraction) | ~face_seen\n",
+                "            needed = fraction >= params.min_new_fraction\n",
+            )
+        ],
+    ),
+    "D33": (
+        "rule 5's exception for every face, held or not",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "            needed = (fraction >= params.min_new_fraction) | ~face_seen\n",
+                "            needed = np.ones(len(rows), bool)\n",
+            )
+        ],
+    ),
+    "D34": (
+        "the faces a chosen view holds not marked as held",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "            face_seen |= face_in_view[best]\n",
+                "",
+            )
+        ],
+    ),
+    "D35": (
+        "the known tasks' views not asked whether they hold a candidate's face",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "            face_seen = _covered(existing_rows, looked_at, camera)\n",
+                "            pass\n",
             )
         ],
     ),
