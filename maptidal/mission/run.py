@@ -1133,13 +1133,11 @@ class Mission:
             needed = view_pitch(task.direction)
             pitch = pitch_to_fly(needed, robot.max_pitch_deg, self.params.direction_tolerance_deg)
             if pitch is None:  # the camera cannot be pointed along the view: give it up, and say why
-                robot.skipped.add(key)
-                agent.give_up(key, now)
                 reason = (
                     f"the view needs {math.degrees(needed):.0f} deg of pitch; {robot.name} pitches at most "
                     f"{robot.max_pitch_deg:g} deg (tolerance {self.params.direction_tolerance_deg:g} deg)"
                 )
-                self.writer.event(now, "declined", robot=robot.name, task=key, reason=reason)
+                self._give_up(robot, key, now, "declined", reason=reason)
                 return
             estimate = self._estimate(robot)
             yaw = math.atan2(task.direction[1], task.direction[0])
@@ -1179,22 +1177,19 @@ class Mission:
             else:
                 robot.within_since_s = None
             if self._stalled(robot, estimate.position, arrived and not believed.verified, now):
-                robot.skipped.add(key)
-                agent.give_up(key, now)
-                robot.activity = "idle"
-                self.writer.event(now, "stalled", robot=robot.name, task=key, still_s=self.params.stall_s)
-                return
-            if 0 < self.params.lost_give_up <= robot.task_losses:
-                robot.skipped.add(key)
-                agent.give_up(key, now)
-                robot.activity = "idle"
-                self.writer.event(now, "gave_up", robot=robot.name, task=key, lost=robot.task_losses)
-                return
-            if now - robot.task_started_s > self.params.task_timeout_s:
-                robot.skipped.add(key)
-                agent.give_up(key, now)  # it leaves this robot's bundle, so a teammate can win it
-                robot.activity = "idle"
-                self.writer.event(now, "timeout", robot=robot.name, task=key)
+                self._give_up(robot, key, now, "stalled", still_s=self.params.stall_s)
+            elif 0 < self.params.lost_give_up <= robot.task_losses:
+                self._give_up(robot, key, now, "gave_up", lost=robot.task_losses)
+            elif now - robot.task_started_s > self.params.task_timeout_s:
+                self._give_up(robot, key, now, "timeout")
+
+    def _give_up(self, robot: _Robot, key: int, now: float, why: str, **fields) -> None:
+        """``robot`` gives task ``key`` up for good: it leaves the robot's bundle, so a teammate can win
+        it, and the robot is idle; the event ``why`` (declined, stalled, gave_up, timeout) says so."""
+        robot.skipped.add(key)
+        self.auction.agents[robot.index].give_up(key, now)
+        robot.activity = "idle"
+        self.writer.event(now, why, robot=robot.name, task=key, **fields)
 
     def _stalled(self, robot: _Robot, position: np.ndarray, short_of_goal: bool, now: float) -> bool:
         """Whether a robot whose route has ended short of its goal has not moved ``stall_move_m`` for
