@@ -15,8 +15,9 @@ On the robot's own :class:`~maptidal.map_discovery.RobotMap`, on its voxel grid:
   Not known to be free, but nothing more is to be seen there;
 - **occupied**: within ``wall_margin_voxels`` of a map landmark. The margin closes the gaps between the
   landmarks of a textured surface, so that a ray does not count the dark behind a wall as unseen water;
-- **outside**: above the water surface (the depth sensor's datum, ``surface_z``), or beyond
-  ``explore_radius_m`` of the robot's launch point (the region it was sent to inspect);
+- **outside**: above the water surface (the depth sensor's datum, ``surface_z``), beyond
+  ``explore_radius_m`` of the robot's launch point, or outside the box ``explore_box`` (the region it was
+  sent to inspect: in the loop, the box the structure lies in grown by the water its views stand in);
 - **unknown**: anything else.
 
 A **frontier** is a free or looked voxel beside an unknown one. Each frontier stands for a candidate look,
@@ -44,7 +45,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from maptidal.camera import OAKD_HFOV_DEG, OAKD_VFOV_DEG
-from maptidal.map_discovery import RobotMap, unpack_voxels
+from maptidal.map_discovery import RobotMap, check_box, unpack_voxels
 
 __all__ = ["FrontierParams", "explore_views", "voxel_states"]
 
@@ -100,6 +101,8 @@ class FrontierParams:
     # structure lies within about that of the launch, and looking further finds structure nobody asked
     # to inspect. Bounding exploration so is standard (Bircher et al. 2016's exploration box)
     explore_radius_m: float | None = 3.0
+    # ... and within this box, lowest and highest corners (None: no box)
+    explore_box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     max_views: int = 5
 
     def __post_init__(self) -> None:
@@ -130,6 +133,8 @@ class FrontierParams:
             raise ValueError(
                 f"exploration explore_radius_m must be positive or None, got {self.explore_radius_m!r}"
             )
+        if self.explore_box is not None:
+            check_box(self.explore_box, "exploration explore_box")
         if self.hfov_deg >= 180 or self.vfov_deg >= 180:
             raise ValueError("exploration fields of view must be under 180 deg")
         for name in ("rays_across", "rays_up", "yaws", "max_candidates", "max_views"):
@@ -190,6 +195,10 @@ def voxel_states(
     if params.explore_radius_m is not None and launch is not None:
         x, y, z = ((axis - centre) ** 2 for axis, centre in zip(axes, np.asarray(launch, float), strict=True))
         outside |= x[:, None, None] + y[None, :, None] + z[None, None, :] > params.explore_radius_m**2
+    if params.explore_box is not None:
+        low, high = (np.asarray(corner, float) for corner in params.explore_box)
+        x, y, z = ((axis < low[d]) | (axis > high[d]) for d, axis in enumerate(axes))
+        outside |= x[:, None, None] | y[None, :, None] | z[None, None, :]
     states[outside & (states != OCCUPIED)] = OUTSIDE
     return grid
 

@@ -19,8 +19,9 @@ it) and adds five rules, each with its reason:
    band point with a point of the 15 cm beneath the band within ``wall_reach_m`` of it horizontally
    is a wall's (:func:`water_surface`). Nor is structure beyond the region the robot was sent to
    inspect: faces farther than ``region_radius_m`` from ``region_centre`` (in the loop, the robot's
-   launch point and its exploration radius) yield no candidate; a glimpse down a long wall is not a
-   task.
+   launch point and its exploration radius), or outside the box ``region_box`` (in the loop, the box the
+   structure to inspect lies in, the mission's ``inspect_box``) grown by ``plane_tolerance_m`` (the
+   map's scatter across a wall), yield no candidate; a glimpse down a long wall is not a task.
 2. **Normals from local surface fits.** A face's normal is the smallest principal axis of the map points
    within ``support_radius_m`` of its centroid (the least-squares plane, as in Hoppe et al. 1992,
    "Surface reconstruction from unorganized points"), turned to face the camera that saw the face. One
@@ -69,13 +70,23 @@ it) and adds five rules, each with its reason:
    tasks' or those the cover took: then ``min_new_points`` suffice. A face at the top or the foot of a
    wall has its view lifted away from it (rule 4), and adds only the strip its neighbours' frames stop
    short of, a small share of its footprint; yet no other view holds that face.
-   Occlusion is not modelled in this count.
+   Occlusion is not modelled in this count. Only cells in the region to inspect count (rule 1's box).
 
 Candidates come from the keyframe mesh's faces and, with ``dense_candidates_m`` above 0 (off by
 default), from the keyframe's dense depth as well, one per cell of that size, each taken as a face shrunk
 to its point: a bare stretch of wall gives the keypoint mesh no face, so no candidate, however well the
 dense depth maps it. Since rule 4's lift it leaves no less of the walls uninspected than the default,
 for more than twice the tasks (README, "Closed-loop mission"), so it is off by default.
+
+**A view the team has since taken is retired** (:func:`views_left_to_take`). Rule 5 judges a candidate
+against the views the robot knows when it finds it, on the map it has then. By the time a robot comes
+to fly a task, the team may have taken views that hold all of it: a teammate's task heard late, or the
+robot's own views, each wider in the water than on the map it was planned on. A task whose view holds
+fewer than ``min_new_points`` cells of the robot's map (now) that no view taken since covers is retired
+before it is flown: it is marked done in the auction, with a ``retired`` event, and no image. Only views
+taken count, never those planned, so two open tasks cannot retire each other; and only the cell count,
+not rule 5's share, since a view at the top of a wall adds only a strip (rule 5's exception), which the
+share would take for a repeat.
 
 Every number is a parameter of :class:`MapAwareParams`; the defaults are chosen by the reasoning given
 beside them, not fitted to a tank. Pure numpy and scipy: it runs on a real robot's landmarks as well.
@@ -150,6 +161,9 @@ class MapAwareParams:
     # robot inspects the structure it explores, and not what it glimpses beyond
     region_centre: tuple[float, float, float] | None = None
     region_radius_m: float | None = None
+    # ... and the box the structure to inspect lies in, as its lowest and highest corners (None: no box):
+    # what an operator states of the job, as the baselines are given the walls themselves
+    region_box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     # a teammate is not structure: landmarks and faces within this of where its last message put it are
     # left out, the radius growing by ``teammate_speed_m_s`` for each second the message is old. 0.39 m
     # is half the BlueROV2 Heavy's diagonal (0.457 x 0.575 x 0.254 m, Blue Robotics' technical details);
@@ -257,6 +271,8 @@ class MapAwareParams:
             raise ValueError(
                 f"map-aware region_centre must be three finite numbers or None, got {self.region_centre!r}"
             )
+        if self.region_box is not None:
+            check_box(self.region_box, "map-aware region_box")
         if self.surface_z is not None and not math.isfinite(self.surface_z):
             raise ValueError(f"map-aware surface_z must be finite or None, got {self.surface_z!r}")
         if self.max_view_pitch_deg is not None and not 0.0 <= self.max_view_pitch_deg <= 90.0:
@@ -266,6 +282,25 @@ class MapAwareParams:
 
 
 SURFACE_BAND_M = 0.15
+
+
+def check_box(box, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """A box given as its lowest and highest corners, checked: two rows of three finite numbers, the
+    first no higher than the second on any axis (raises ValueError naming ``name`` otherwise)."""
+    try:
+        corners = np.asarray(box, float)
+    except (TypeError, ValueError):
+        corners = np.zeros(0)
+    if corners.shape != (2, 3) or not np.isfinite(corners).all() or (corners[0] > corners[1]).any():
+        raise ValueError(f"{name} must be [[x, y, z], [x, y, z]], the lowest corner first, got {box!r}")
+    return corners[0], corners[1]
+
+
+def in_box(points: np.ndarray, box, margin_m: float = 0.0) -> np.ndarray:
+    """Which ``points`` ``(N, 3)`` lie in the ``box`` (lowest and highest corners) grown by ``margin_m``."""
+    low, high = (np.asarray(corner, float) for corner in box)
+    points = np.asarray(points, float).reshape(-1, 3)
+    return np.all((points >= low - margin_m) & (points <= high + margin_m), axis=1)
 
 
 def water_surface(points: np.ndarray, surface_z: float, wall_reach_m: float) -> np.ndarray:
@@ -788,6 +823,16 @@ def lift_into_free(
     return rows, free, lifted
 
 
+def coverage_cells(points: np.ndarray, params: MapAwareParams) -> np.ndarray:
+    """The centres of the ``coverage_voxel_m`` cells that hold map ``points``, rule 5's count: those in
+    the region to inspect (``region_box``, grown as rule 1 grows it), since structure outside it is no
+    one's job, and a view is not new for showing it."""
+    cells = (np.unique(voxel_keys(points, params.coverage_voxel_m), axis=0) + 0.5) * params.coverage_voxel_m
+    if params.region_box is not None:
+        cells = cells[in_box(cells, params.region_box, params.plane_tolerance_m)]
+    return cells
+
+
 def _covered(rows: np.ndarray, cells: np.ndarray, camera) -> np.ndarray:
     # which coverage cells any of ``rows`` sees
     seen = np.zeros(len(cells), bool)
@@ -836,6 +881,10 @@ def discover_on_map(
         offsets = triangles.mean(axis=1) - np.asarray(params.region_centre, float)
         inside = np.einsum("ij,ij->i", offsets, offsets) <= params.region_radius_m**2
         outside = int((~inside).sum())
+        triangles = triangles[inside]
+    if params.region_box is not None:
+        inside = in_box(triangles.mean(axis=1), params.region_box, params.plane_tolerance_m)
+        outside += int((~inside).sum())
         triangles = triangles[inside]
     centres = triangles.mean(axis=1)
     points = robot_map.points()
@@ -890,8 +939,7 @@ def discover_on_map(
     redundant_before = len(rows)
     final = np.zeros((0, 6))
     if len(rows):
-        cells = np.unique(voxel_keys(points, params.coverage_voxel_m), axis=0)
-        cells = (cells + 0.5) * params.coverage_voxel_m
+        cells = coverage_cells(points, params)
         camera = discovery.camera
         covered = _covered(existing_rows, cells, camera) if len(existing_rows) else np.zeros(len(cells), bool)
         sees = np.stack(list(frustum_masks(rows, cells, camera)))
@@ -927,3 +975,23 @@ def discover_on_map(
         refitted=len(rescued),
         outside=outside,
     )
+
+
+def views_left_to_take(
+    robot_map: RobotMap, rows: np.ndarray, taken: np.ndarray, discovery: DiscoveryParams | None = None
+) -> np.ndarray:
+    """Which of the views ``rows`` ``(N, 6)`` still hold at least ``min_new_points`` cells of the robot's
+    map (on the ``coverage_voxel_m`` grid, as rule 5 counts them) that none of the views ``taken``
+    ``(K, 6)`` holds (module docstring, "A view the team has since taken is retired"). On an empty map,
+    every view is left to take: nothing says it is not."""
+    params = robot_map.params
+    discovery = discovery or DiscoveryParams()
+    rows = validate_viewpoints(rows, "views to review").reshape(-1, 6)
+    taken = validate_viewpoints(taken, "views taken").reshape(-1, 6)
+    points = robot_map.points()
+    if len(rows) == 0 or len(taken) == 0 or len(points) == 0:
+        return np.ones(len(rows), bool)
+    cells = coverage_cells(points, params)
+    covered = _covered(taken, cells, discovery.camera)
+    left = np.array([int((sees & ~covered).sum()) for sees in frustum_masks(rows, cells, discovery.camera)])
+    return left >= params.min_new_points

@@ -59,11 +59,12 @@ entry_st = st.tuples(
     entries=st.lists(entry_st, max_size=30),
     n_tasks=st.integers(0, 4),
     position_cm=st.one_of(st.none(), st.tuples(*[st.integers(-32767, 32767)] * 3)),
+    goal_cm=st.one_of(st.none(), st.tuples(*[st.integers(-32767, 32767)] * 3)),
     giving_way=st.booleans(),
     idle=st.booleans(),
 )
 def test_messages_round_trip_exactly(
-    sender, seq, clocks, acks, entries, n_tasks, position_cm, giving_way, idle
+    sender, seq, clocks, acks, entries, n_tasks, position_cm, goal_cm, giving_way, idle
 ):
     tasks = [
         Task.create(task_key(3, c), [c * 0.37, -2.5, 1.01], [1, c, -0.5], ("camera",)) for c in range(n_tasks)
@@ -78,12 +79,14 @@ def test_messages_round_trip_exactly(
         winners=np.array([w for _, _, w, _ in entries], dtype=np.int64),
         bids=np.array([b for *_, b in entries]),
         position=None if position_cm is None else tuple(v / 100.0 for v in position_cm),
+        goal=None if goal_cm is None else tuple(v / 100.0 for v in goal_cm),
         giving_way=giving_way,
         idle=idle,
     )
     data = encode(message)
     assert len(data) == size_of(len(clocks), len(acks), n_tasks, len(entries))
     assert decode(data).position == message.position  # to the centimetre, or unknown
+    assert decode(data).goal == message.goal
     assert decode(data).giving_way == giving_way and decode(data).idle == idle
     back = decode(data)
     assert (back.sender, back.seq, back.acks) == (sender, seq, acks)
@@ -216,7 +219,7 @@ def test_damaged_messages_are_rejected_with_a_reason(mangle, reason):
 
 def test_status_bits_beyond_giving_way_and_idle_are_malformed():
     body = bytearray(_a_message()[:-2])
-    status_at = 7 + 6  # after the header (version, sender, seq u32, n_clocks) and the position
+    status_at = 7 + 12  # after the header (version, sender, seq u32, n_clocks), the position and goal
     assert body[status_at] == 0
     for bad in (0x04, 0x80, 0x07):
         body[status_at] = bad
@@ -743,3 +746,26 @@ def test_a_full_message_carries_the_done_tasks_then_the_path_in_flying_order():
     data = agent.make_message(3.0, capacity_bytes=size_of(2, 1, 0, 3))
     sent = decode(data).keys.tolist()
     assert sent == [done, path[0], path[1]]
+
+
+def test_a_robot_tells_its_teammates_where_it_is_bound_when_that_changes():
+    """Its goal goes in every message; a new goal (or one moved past ``goal_news_m``) is news, sent at
+    the next slot even with nothing else to say; a small move waits for the next heartbeat."""
+    robots, _ = random_instance(2, 0, 1)
+    agent, peer = CBBAAgent(robots[0]), CBBAAgent(robots[1])
+    assert peer.receive(agent.make_message(0.0), 0.1)
+    assert peer.peer_goals[agent.index] is None  # holding where it is
+    assert agent.make_message(1.0) is None  # nothing to say, heartbeat not due
+    agent.goal = np.array([1.0, 2.0, 0.5])
+    data = agent.make_message(2.0)
+    assert data is not None and decode(data).goal == (1.0, 2.0, 0.5)
+    assert peer.receive(data, 2.1)
+    np.testing.assert_allclose(peer.peer_goals[agent.index], [1.0, 2.0, 0.5])
+    agent.goal = np.array([1.3, 2.0, 0.5])  # 0.3 m on: not news
+    assert agent.make_message(3.0) is None
+    agent.goal = np.array([2.0, 2.0, 0.5])  # 1 m from the goal last sent: news
+    assert decode(agent.make_message(4.0)).goal == (2.0, 2.0, 0.5)
+    agent.goal = None  # stopped: news
+    data = agent.make_message(5.0)
+    assert data is not None and decode(data).goal is None
+    assert peer.receive(data, 5.1) and peer.peer_goals[agent.index] is None

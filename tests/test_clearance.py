@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from maptidal.mission.clearance import segment_entry, waiting_point
+from maptidal.mission.clearance import capsule_entry, segment_entry, waiting_point
 
 RADIUS = 1.0
 point_st = st.tuples(*[st.floats(-3.0, 3.0, allow_nan=False)] * 3).map(np.array)
@@ -42,6 +42,73 @@ def test_a_robot_outside_every_ball_stops_where_its_way_first_enters_one(start, 
     assert all(np.linalg.norm(point - c) >= RADIUS - 1e-6 for c in centres)  # inside none
     if brute is not None:
         assert fraction <= brute + 1e-9 and brute - fraction < 1e-3  # the first entry, not a later one
+
+
+def _first_inside_capsule(start, end, first, last, radius, samples=2001):
+    """The first of many evenly spaced points along the way that lies within ``radius`` of one of many
+    evenly spaced points of the capsule's axis, as a fraction of the way, or None: brute force, sharing
+    nothing with the module's closed forms."""
+    fractions = np.linspace(0.0, 1.0, samples)
+    way = start + fractions[:, None] * (end - start)
+    axis = first + np.linspace(0.0, 1.0, 401)[:, None] * (last - first)
+    nearest = np.min(np.linalg.norm(way[:, None, :] - axis[None, :, :], axis=2), axis=1)
+    hits = np.flatnonzero(nearest < radius)
+    return None if not len(hits) else float(fractions[hits[0]])
+
+
+@settings(max_examples=200, deadline=None)
+@given(start=point_st, end=point_st, first=point_st, last=point_st)
+def test_a_robot_stops_where_its_way_first_enters_a_teammates_capsule(start, end, first, last):
+    """A teammate bound somewhere is kept clear of along its way (a capsule), checked against a walk
+    along both segments."""
+    axis = np.stack([first, last])
+    brute_axis = first + np.linspace(0.0, 1.0, 401)[:, None] * (last - first)
+    if np.min(np.linalg.norm(brute_axis - start, axis=1)) <= RADIUS + 1e-2:
+        return  # outside only, with room for the brute force's spacing
+    brute = _first_inside_capsule(start, end, first, last, RADIUS)
+    entry = capsule_entry(start, end, axis, RADIUS)
+    step = np.linalg.norm(last - first) / 400 + 1e-9
+    if entry is None:
+        assert (
+            brute is None
+            or np.min(np.linalg.norm(brute_axis - (start + brute * (end - start)), axis=1)) > RADIUS - step
+        )
+        return
+    point = start + entry * (end - start)
+    assert abs(np.min(np.linalg.norm(brute_axis - point, axis=1)) - RADIUS) < step + 1e-6  # on the surface
+    if brute is None:  # the way only touches the capsule: it ends on it, or grazes it
+        way = start + np.linspace(0.0, 1.0, 2001)[:, None] * (end - start)
+        nearest = min(np.min(np.linalg.norm(brute_axis - p, axis=1)) for p in way)
+        assert nearest > RADIUS - step - 1e-3
+    else:
+        assert brute >= entry - 1e-9
+        assert (brute - entry) * np.linalg.norm(end - start) < 2e-2  # the first entry, not a later one
+    stop = waiting_point(start, end, [axis], RADIUS)
+    assert stop is not None and np.allclose(stop[0], point)
+
+
+def test_a_capsule_of_no_length_is_a_ball():
+    start, end, centre = np.array([-3.0, 0.2, 0]), np.array([3.0, 0.1, 0]), np.zeros(3)
+    assert capsule_entry(start, end, np.stack([centre, centre]), 1.0) == segment_entry(
+        start, end, centre, 1.0
+    )
+
+
+def test_a_robot_crossing_a_teammates_way_waits_before_it():
+    """A teammate at the origin bound 3 m along x: a robot crossing that way at x = 2 stops 1 m short of
+    it, where the teammate's ball alone would have let it through."""
+    teammate, bound = np.zeros(3), np.array([3.0, 0.0, 0.0])
+    start, target = np.array([2.0, -3.0, 0.0]), np.array([2.0, 3.0, 0.0])
+    assert waiting_point(start, target, [teammate], RADIUS) is None
+    stop = waiting_point(start, target, [np.stack([teammate, bound])], RADIUS)
+    assert stop is not None
+    np.testing.assert_allclose(stop[0], [2.0, -1.0, 0.0])
+    # inside the teammate's way but outside its ball, it goes on, and stops short of the ball
+    way = np.stack([teammate, bound])
+    towards = waiting_point(np.array([2.0, 0.2, 0.0]), np.array([-2.0, 0.2, 0.0]), [way], RADIUS)
+    assert towards is not None
+    np.testing.assert_allclose(towards[0], [np.sqrt(1.0 - 0.04), 0.2, 0.0])
+    assert waiting_point(np.array([2.0, 0.2, 0.0]), np.array([2.0, 3.0, 0.0]), [way], RADIUS) is None
 
 
 def test_a_robot_inside_a_ball_backs_out_at_its_own_depth_unless_it_is_leaving():

@@ -222,6 +222,15 @@ def test_teammates_places_surveyed_and_the_region_bound_the_looks():
     # a region of 0.5 m about the launch holds almost no unknown water: no look is worth a trip
     small = FrontierParams(explore_radius_m=0.5)
     assert len(explore_views(robot_map, camera, small, launch=camera)) == 0
+    # ... nor does a box about the camera of 0.5 m each way; the box's voxels are outside beyond it
+    box = tuple(tuple(float(v) for v in camera + side) for side in (-0.5, 0.5))
+    boxed = FrontierParams(explore_radius_m=None, explore_box=box)
+    assert len(explore_views(robot_map, camera, boxed)) == 0
+    grid = voxel_states(robot_map, boxed)
+    centres = grid.centres(np.argwhere(grid.states != OCCUPIED))
+    beyond = np.any((centres < camera - 0.5) | (centres > camera + 0.5), axis=1)
+    states = grid.states[tuple(np.argwhere(grid.states != OCCUPIED).T)]
+    assert beyond.any() and (states[beyond] == OUTSIDE).all() and not (states[~beyond] == OUTSIDE).all()
 
 
 def test_an_empty_or_lost_map_gives_no_look():
@@ -242,6 +251,7 @@ def test_an_empty_or_lost_map_gives_no_look():
         {"rays_across": 2.5},
         {"hfov_deg": 200.0},
         {"wall_margin_voxels": -1},
+        {"explore_box": ((0, 0, 0), (1, 1, float("nan")))},
     ],
 )
 def test_bad_exploration_settings_are_refused(bad):

@@ -18,7 +18,7 @@ from maptidal.evaluation.free_space import free_space_mask
 from maptidal.mission import run as run_module
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import read_events
-from maptidal.mission.run import Mission, MissionParams
+from maptidal.mission.run import Mission, MissionParams, inspection_box
 from maptidal.tank import LadderConfig, TankConfig, TankModel, WindowConfig
 
 REACHABLE = run_module.reachable
@@ -239,6 +239,12 @@ def test_each_keyframes_dense_depth_maps_the_walls_where_they_are(tmp_path, dens
         region = maps[spec.name].params
         assert region.region_radius_m == params.frontier.explore_radius_m
         assert np.allclose(region.region_centre, spec.position, atol=0.02)
+        # ... within the box of the walls it was sent to inspect; it explores that box grown by the water
+        # its views stand in
+        box = inspection_box(params, scenario.tank)
+        np.testing.assert_allclose(region.region_box, box)
+        reach = params.discovery.standoff + region.clearance_m
+        np.testing.assert_allclose(mission.explore_params.explore_box, [box[0] - reach, box[1] + reach])
     # with dense candidates a keyframe has more candidates than its mesh has faces; without, as many
     keyframes = [e for e in read_events(tmp_path) if e["kind"] == "keyframe" and "rules" in e]
     assert keyframes
@@ -288,3 +294,43 @@ def test_the_maps_settings_in_a_mission_file_are_checked(tmp_path, capsys):
     path.write_text(base + "\n[mission]\ndense_candidates_m = 0.25\n")
     _, settings = load_mission(path)
     assert settings["map_aware"].dense_candidates_m == 0.25 and settings["map_aware"].dense_depth is True
+
+
+def test_perception_reviews_the_path_against_the_views_taken_on_its_map():
+    """``perception._review``: of the tasks on the robot's path, the keys of those whose views the done
+    tasks' views leave fewer than min_new_points cells to; tasks neither on the path nor done are
+    neither reviewed nor counted as taken."""
+    from maptidal.discovery import DiscoveryParams
+    from maptidal.map_discovery import MapAwareParams, RobotMap
+    from maptidal.mission.perception import FrameJob, _review
+    from maptidal.perception.recording import CameraPose
+
+    ys, zs = np.meshgrid(np.arange(-2.0, 2.0, 0.05), np.arange(0.0, 2.0, 0.05))
+    wall = np.column_stack([np.full(ys.size, 3.0), ys.ravel(), zs.ravel()])
+    robot_map = RobotMap(MapAwareParams())
+    robot_map.add_keyframe(np.array([1.0, 0.0, 1.0]), np.arange(len(wall)), wall)
+    rows = np.array(
+        [
+            [2.0, 0.0, 1.0, 1.0, 0.0, 0.0],  # done
+            [2.0, 0.02, 1.0, 1.0, 0.0, 0.0],  # on the path, as good as the done one: retired
+            [2.0, 1.6, 1.0, 1.0, 0.0, 0.0],  # on the path, mostly new: kept
+            [2.0, 1.6, 1.0, 1.0, 0.0, 0.0],  # open, not on the path: not reviewed, not taken
+        ]
+    )
+    pose = CameraPose(np.zeros(3), np.eye(3))
+    job = FrameJob(
+        "rov0",
+        0.0,
+        None,
+        None,
+        pose,
+        pose,
+        rows,
+        existing_keys=np.array([10, 11, 12, 13]),
+        existing_done=np.array([True, False, False, False]),
+        to_review=np.array([False, True, True, False]),
+    )
+    assert _review(robot_map, job, DiscoveryParams()).tolist() == [11]
+    nothing_done = dataclasses.replace(job, existing_done=np.zeros(4, bool))
+    assert _review(robot_map, nothing_done, DiscoveryParams()).tolist() == []
+    assert _review(robot_map, dataclasses.replace(job, to_review=None), DiscoveryParams()).tolist() == []

@@ -16,6 +16,7 @@ from maptidal.discovery import DiscoveryParams
 from maptidal.map_discovery import (
     MapAwareParams,
     RobotMap,
+    coverage_cells,
     discover_on_map,
     fit_planes,
     lift_into_free,
@@ -23,6 +24,7 @@ from maptidal.map_discovery import (
     near_teammates,
     reachable_on_map,
     refit_on_faces,
+    views_left_to_take,
     water_surface,
 )
 
@@ -315,6 +317,39 @@ def test_faces_beyond_the_region_to_inspect_yield_no_candidate():
     assert none.outside == 2 and len(none.final) == 0
 
 
+def test_faces_outside_the_box_to_inspect_yield_no_candidate_nor_count_in_rule_5():
+    """A box of the wall from y = 0 to 2 (grown by plane_tolerance_m): the face at y = 1 is in it, the one
+    at y = 3 is not; and a view of the box's edge is new only for what of the box it adds."""
+    rng = np.random.default_rng(36)
+    points, ids, camera = _wall_scene(rng)
+    near, far = points[_face_at(points, [3.0, 1.0, 1.0])], points[_face_at(points, [3.0, 3.0, 1.0])]
+    vertices, faces = np.vstack([near, far]), [[0, 1, 2], [3, 4, 5]]
+    params = MapAwareParams(
+        min_new_fraction=0.0, min_new_points=1, region_box=((2.9, 0.0, 0.0), (3.1, 2.0, 2.0))
+    )
+    result = discover_on_map(_map_of(points, ids, camera, params), vertices, faces, camera)
+    assert result.outside == 1 and len(result.final) == 1
+    assert result.final[0, 1] == pytest.approx(1.0, abs=0.1)
+    # rule 5's cells: only those in the box grown by the plane tolerance (brute force on the cells)
+    cells = coverage_cells(points, params)
+    every = (np.unique(np.floor(points / 0.1), axis=0) + 0.5) * 0.1
+    low, high = np.array([2.8, -0.1, -0.1]), np.array([3.2, 2.1, 2.1])
+    expected = every[np.all((every >= low) & (every <= high), axis=1)]
+    assert sorted(map(tuple, cells.round(6))) == sorted(map(tuple, expected.round(6)))
+    # a view at y = 2.6 looking at the wall past the box's edge sees cells of the box only at y <= 2.1:
+    # views taken over the box leave it nothing, though it shows 1.7 m of wall beyond
+    taken = np.array([[2.0, 1.0, 1.0, 1.0, 0.0, 0.0], [2.0, 1.8, 1.0, 1.0, 0.0, 0.0]])
+    edge = np.array([[2.0, 2.6, 1.0, 1.0, 0.0, 0.0]])
+    boxed = _map_of(points, ids, camera, replace(params, min_new_points=8))
+    assert views_left_to_take(boxed, edge, taken).tolist() == [False]
+    unboxed = _map_of(points, ids, camera, replace(params, min_new_points=8, region_box=None))
+    assert views_left_to_take(unboxed, edge, taken).tolist() == [True]
+    with pytest.raises(ValueError, match="region_box"):
+        MapAwareParams(region_box=((0, 0, 0), (1, -1, 1)))
+    with pytest.raises(ValueError, match="region_box"):
+        MapAwareParams(region_box=((0, 0), (1, 1)))
+
+
 # ----- rule 4: free space from the robot's own map -----------------------------------------------------
 
 
@@ -491,6 +526,37 @@ def test_a_face_at_the_top_of_the_wall_that_no_view_holds_gets_its_view_though_i
     assert params.min_new_points <= still_new.sum() < params.min_new_fraction * footprint.sum()
     again = discover_on_map(robot_map, vertices, [[0, 1, 2]], camera, existing=higher)
     assert len(again.final) == 0 and again.redundant == 1
+
+
+def test_a_view_the_views_taken_cover_is_retired_and_one_they_miss_kept():
+    """views_left_to_take against brute force: a view next to one taken leaves fewer than min_new_points
+    of the map's cells to see; one 2 m along, and one over the top strip a taken view stops short of,
+    leave more (the strip under min_new_fraction of its footprint: the share is not asked)."""
+    rng = np.random.default_rng(8)
+    points, ids, camera = _wall_scene(rng)
+    params = MapAwareParams()
+    robot_map = _map_of(points, ids, camera, params)
+    discovery = DiscoveryParams()
+    taken = np.array([[2.0, 1.0, 1.0, 1.0, 0.0, 0.0]])
+    rows = np.array([[2.0, 1.05, 1.0, 1.0, 0.0, 0.0], [2.0, 3.0, 1.0, 1.0, 0.0, 0.0]])
+    left = views_left_to_take(robot_map, rows, taken, discovery)
+    cells = (np.unique(np.floor(points / 0.1), axis=0) + 0.5) * 0.1
+    unseen = [(_sees(row, cells, discovery) & ~_sees(taken[0], cells, discovery)).sum() for row in rows]
+    assert unseen[0] < params.min_new_points <= unseen[1]
+    assert left.tolist() == [False, True]
+    # nothing taken: every view is left
+    assert views_left_to_take(robot_map, rows, np.zeros((0, 6)), discovery).all()
+    # the top of a wall: the strip over a level view's frame is left to take
+    points, camera, _, _ = _low_and_high_faces(rng)
+    robot_map = _map_of(points, np.arange(len(points)), camera, MapAwareParams(surface_z=2.0))
+    level, top = np.array([[2.0, 3.0, 1.35, 1.0, 0.0, 0.0]]), np.array([[2.0, 3.0, 1.6, 1.0, 0.0, 0.0]])
+    cells = (np.unique(np.floor(points / 0.1), axis=0) + 0.5) * 0.1
+    strip = _sees(top[0], cells, discovery) & ~_sees(level[0], cells, discovery)
+    footprint = _sees(top[0], cells, discovery).sum()
+    assert params.min_new_points <= strip.sum() < params.min_new_fraction * footprint
+    assert views_left_to_take(robot_map, top, level, discovery).tolist() == [True]
+    below = (_sees(level[0], cells, discovery) & ~_sees(top[0], cells, discovery)).sum()
+    assert views_left_to_take(robot_map, level, top, discovery).tolist() == [below >= params.min_new_points]
 
 
 def test_two_candidates_on_one_patch_give_one_task():

@@ -5,6 +5,7 @@ log after a kill -9, and bad mission files."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import signal
@@ -12,6 +13,7 @@ import subprocess
 import sys
 import threading
 import time
+import types
 
 import numpy as np
 import pytest
@@ -29,7 +31,7 @@ def short_mission(tmp_path_factory):
     out = tmp_path_factory.mktemp("mission")
     # the paper's discovery: these tests of the loop's workings need the many tasks it finds, and an
     # unfinished mission (README, "Map-aware discovery")
-    mission = Mission(scenario, MissionParams(duration_s=45.0, seed=3, discovery_mode="paper"), out)
+    mission = Mission(scenario, MissionParams(duration_s=55.0, seed=3, discovery_mode="paper"), out)
     document = mission.run()
     return mission, document, out
 
@@ -37,7 +39,7 @@ def short_mission(tmp_path_factory):
 def test_a_mission_cut_off_by_its_cap_says_what_was_left(short_mission):
     _, document, out = short_mission
     done = sum(1 for t in document["tasks"] if t["completed"])
-    open_tasks = len(document["tasks"]) - done  # in 45 s nobody has given a task up
+    open_tasks = len(document["tasks"]) - done  # in 55 s nobody has given a task up
     assert not document["finished"]
     assert document["ending"].startswith(f"not finished at the {document['sim_time_s']:.1f} s cap")
     assert (
@@ -148,7 +150,7 @@ def test_the_same_seed_gives_the_same_mission_with_perception_apart_or_inline(sh
     assert first["parallel"]["perception"] == "process"
     again = Mission(
         scenario,
-        MissionParams(duration_s=45.0, seed=3, perception_process=False, discovery_mode="paper", plots=False),
+        MissionParams(duration_s=55.0, seed=3, perception_process=False, discovery_mode="paper", plots=False),
         tmp_path,
     ).run()
     assert again["parallel"]["perception"] == "inline"
@@ -287,6 +289,10 @@ def _alive(pid: int) -> bool:
         ('[mission]\nwater_backend = "gpu"\n', "water_backend"),
         ("[mission]\nwater_backend = 1\n", "water_backend"),
         ("[mission]\ncommand_rate_hz = 0\n", "command_rate_hz"),
+        ('[mission]\ninspect_region = "sea"\n', "inspect_region"),
+        ("[mission]\ninspect_box = [[0, 0, 0], [1, -1, 1]]\n", "inspect_box"),
+        ("[mission]\ninspect_box = 3\n", "inspect_box"),
+        ("[mission]\nretire_taken = 1\n", "retire_taken"),
         ('[[mission.events]]\ntime_s = 5\nkind = "fail"\nrobot = "rov7"\n', "rov7"),
         ("[mission]\nspeed = 3\n", "[mission] takes only"),
         ('[[mission.events]]\ntime_s = 5\nkind = "join"\nrobot = "rov9"\n', "rov9"),
@@ -540,6 +546,34 @@ def _placed(mission, positions: dict):
     )
 
 
+def test_a_robot_keeps_clear_of_the_way_a_teammate_said_it_was_bound(tmp_path):
+    """A teammate heard at the origin bound 3 m along x may be anywhere on that way as far as it can
+    have flown since (0.25 m/s): a robot crossing the way at x = 2 goes on 2 s after the message and
+    waits 12 s after it, 1 m short of the way. Its own messages say where it is bound: its route's end."""
+    from maptidal.controllers.trajectory import PoseReference, PoseTrajectory, Route
+
+    scenario, _ = load_mission(None)
+    params = MissionParams(duration_s=1.0, clearance_m=1.0, peer_fresh_s=30.0, speed_m_s=0.25, plots=False)
+    mission = Mission(scenario, params, tmp_path)
+    rov0, rov1 = mission.robots["rov0"], mission.robots["rov1"]
+    agent = mission.auction.agents[rov1.index]
+    agent.peer_positions[rov0.index] = (np.array([0.0, 0.0, 1.0]), 10.0)
+    agent.peer_goals[rov0.index] = np.array([3.0, 0.0, 1.0])
+    _placed(mission, {"rov1": [2.0, -3.0, 1.0]})
+    crossing = PoseReference(np.array([2.0, 3.0, 1.0]), np.zeros(3), np.zeros(3), 0.0, 0.0)
+    assert mission._keep_clear(rov1, crossing, now=12.0) is crossing  # 0.5 m along, at most
+    waits = mission._keep_clear(rov1, crossing, now=22.0)
+    np.testing.assert_allclose(waits.position, [2.0, -1.0, 1.0])
+    assert agent.goal is None  # not flying anywhere yet
+    rov1.route = Route([PoseTrajectory(np.zeros(3), 0.0, np.array([1.0, 2.0, 0.5]), 0.0, mission._limits())])
+    rov1.activity = "fly"
+    mission._keep_clear(rov1, crossing, now=22.0)
+    np.testing.assert_allclose(agent.goal, [1.0, 2.0, 0.5])
+    agent.peer_goals[rov0.index] = None  # holding where it is: a ball again
+    assert mission._keep_clear(rov1, crossing, now=22.0) is crossing
+    mission.sim.close()
+
+
 def test_a_robot_keeps_clear_of_a_teammate_it_has_heard_from(tmp_path):
     from maptidal.controllers.trajectory import PoseReference
 
@@ -781,7 +815,7 @@ def test_drawing_on_the_loops_own_thread_gives_the_same_mission(short_mission, t
     scenario, _ = load_mission(None)
     _, first, first_out = short_mission
     again = Mission(
-        scenario, MissionParams(duration_s=45.0, seed=3, discovery_mode="paper", plots=False), tmp_path
+        scenario, MissionParams(duration_s=55.0, seed=3, discovery_mode="paper", plots=False), tmp_path
     )
     assert isinstance(again._gl, run_module._SameThread)
     document = again.run()
@@ -866,3 +900,50 @@ def test_a_mission_flown_without_plots_draws_none_and_the_report_draws_them_late
     assert maptidal_here("report", tmp_path).returncode == 0
     assert all((tmp_path / name).stat().st_size > 0 for name in PLOTS)
     assert "![top view](top_view.png)" in (tmp_path / "report.md").read_text()
+
+
+def test_the_box_a_team_is_sent_to_inspect():
+    """``inspect_region = "walls"``: the box of the tank's evaluated walls, written out for the default
+    tank (end wall 2.4 m, angled walls 1 m at 45 deg, 0.5 m of each side wall, a 10 cm window recess, 2 m
+    of water); "launch": none; ``inspect_box`` states one."""
+    from maptidal.mission.run import inspection_box
+
+    scenario, _ = load_mission(None)
+    box = inspection_box(MissionParams(), scenario.tank)
+    reach = 1.2 + math.sqrt(0.5)
+    np.testing.assert_allclose(box, [[-math.sqrt(0.5) - 0.5, -reach, 0.0], [0.1, reach, 2.0]], atol=1e-9)
+    assert inspection_box(MissionParams(inspect_region="launch"), scenario.tank) is None
+    given = ((-1.0, -1.0, 0.0), (0.0, 1.0, 2.0))
+    np.testing.assert_allclose(inspection_box(MissionParams(inspect_box=given), scenario.tank), given)
+
+
+def test_a_robot_retires_the_task_its_review_found_covered_when_it_comes_to_it(tmp_path):
+    """The review's answer (``_Robot.covered``) is acted on when the robot comes to the task: done in
+    the auction without an image, a ``retired`` event and the ledger's ``retired``; a task not covered
+    is flown."""
+    scenario, _ = load_mission(None)
+    mission = Mission(scenario, MissionParams(duration_s=1.0, plots=False), tmp_path)
+    robot = mission.robots["rov0"]
+    agent = mission.auction.agents[robot.index]
+    covered = agent.discover_task([-1.0, 0.2, 1.0], [1.0, 0.0, 0.0], now_s=0.0)
+    flown = agent.discover_task([-1.0, -0.6, 1.0], [1.0, 0.0, 0.0], now_s=0.0)
+    agent.build_bundle(0.0)
+    assert set(agent.path_keys()) == {covered.key, flown.key}
+    first = agent.path_keys()[0]
+    robot.activity, robot.explored, robot.covered = "idle", True, {covered.key}
+    _placed(mission, {"rov0": [-1.5, 0.0, 1.0]})
+    mission._estimate = lambda r: types.SimpleNamespace(position=np.array([-1.5, 0.0, 1.0]), yaw=0.0)
+    mission._advance_activity(robot, now=2.0)
+    if first == flown.key:  # flies the first; the covered one waits its turn
+        assert robot.activity == "fly" and agent.is_open(covered.key)
+        robot.activity = "idle"
+        agent.mark_done(flown.key, 3.0)
+        mission._advance_activity(robot, now=3.0)
+    assert not agent.is_open(covered.key) and robot.activity == "idle"
+    assert mission.tasks[covered.key]["retired"] and not mission.tasks[covered.key].get("completed")
+    assert covered.key not in robot.covered
+    mission._advance_activity(robot, now=4.0)
+    assert robot.activity == "fly" or not agent.is_open(flown.key)
+    mission.sim.close()
+    retired = [e for e in read_events(tmp_path) if e["kind"] == "retired"]
+    assert [(e["robot"], e["task"]) for e in retired] == [("rov0", covered.key)]

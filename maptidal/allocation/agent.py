@@ -56,14 +56,19 @@ class AgentParams:
 
     failure_timeout_s: a robot not heard of (directly or relayed) for this long is declared failed and
     its tasks are released; heartbeat_s: a robot with nothing to say still transmits this often so that
-    the others know it is alive."""
+    the others know it is alive; goal_news_m: a robot whose goal has moved farther than this since its
+    last message (or that became bound, or stopped being) transmits in its next slot, so that teammates
+    keeping clear of its way hear of the new one (half the mission's 1 m clearance)."""
 
     failure_timeout_s: float = 120.0
     heartbeat_s: float = 30.0
+    goal_news_m: float = 0.5
 
     def __post_init__(self) -> None:
         if not (self.failure_timeout_s > 0 and self.heartbeat_s > 0):
             raise ValueError("failure_timeout_s and heartbeat_s must be > 0")
+        if not self.goal_news_m > 0:
+            raise ValueError(f"goal_news_m must be > 0, got {self.goal_news_m!r}")
         if self.failure_timeout_s <= self.heartbeat_s:
             raise ValueError("failure_timeout_s must exceed heartbeat_s, or live robots are declared failed")
 
@@ -94,6 +99,13 @@ def _empty_history(n: int) -> np.ndarray:
     return history
 
 
+def _moved(before: np.ndarray | None, now: np.ndarray | None, distance_m: float) -> bool:
+    """Whether a goal became or stopped being, or moved farther than ``distance_m``."""
+    if before is None or now is None:
+        return (before is None) != (now is None)
+    return float(np.linalg.norm(np.asarray(now, float) - before)) > distance_m
+
+
 def _ms(time_s: float) -> int:
     return round(time_s * 1000.0)
 
@@ -117,6 +129,10 @@ class CBBAAgent:
         # robot index -> whether its last message said it was giving way to a teammate; and whether this
         # robot gives way now (set by whoever flies it, sent in its messages)
         self.peer_giving_way: dict[int, bool] = {}
+        # where each teammate's last message said it was bound (None: nowhere, it holds where it is)
+        self.peer_goals: dict[int, np.ndarray | None] = {}
+        self.goal: np.ndarray | None = None  # where this robot is bound, for its messages (set by its owner)
+        self._sent_goal: np.ndarray | None = None
         self.giving_way = False
         self._sent_giving_way = False
         # nothing left to do (the mission sets it): such a robot gives way to every teammate
@@ -454,6 +470,7 @@ class CBBAAgent:
         self.stats.messages_accepted += 1
         if message.position is not None:
             self.peer_positions[sender] = (np.asarray(message.position, float), now_s)
+        self.peer_goals[sender] = None if message.goal is None else np.asarray(message.goal, float)
         self.peer_giving_way[sender] = message.giving_way
         self.peer_idle[sender] = message.idle
         self._peer_task_array(sender)
@@ -576,7 +593,11 @@ class CBBAAgent:
             self._last_sent_ms is None or now - self._last_sent_ms >= self.params.heartbeat_s * 1000
         )
         # a teammate may be waiting to hear it
-        news = self.giving_way != self._sent_giving_way or self.idle != self._sent_idle
+        news = (
+            self.giving_way != self._sent_giving_way
+            or self.idle != self._sent_idle
+            or _moved(self._sent_goal, self.goal, self.params.goal_news_m)
+        )
         if not (entries.any() or records.any() or self._ack_owed or heartbeat_due or news):
             return None
         n_clocks = int(np.flatnonzero(self.clocks != NEVER).max()) + 1
@@ -601,6 +622,7 @@ class CBBAAgent:
             winners=self.z[entry_slots],
             bids=self.y[entry_slots],
             position=tuple(float(v) for v in self.robot.position),  # type: ignore[arg-type]
+            goal=None if self.goal is None else tuple(float(v) for v in self.goal),  # type: ignore[arg-type]
             giving_way=self.giving_way,
             idle=self.idle,
         )
@@ -619,6 +641,7 @@ class CBBAAgent:
         self._last_sent_ms = now
         self._sent_giving_way = self.giving_way
         self._sent_idle = self.idle
+        self._sent_goal = None if self.goal is None else np.array(self.goal, float)
         self.last_message_had_content = bool(len(entry_slots) or len(record_slots))
         self.stats.messages_sent += 1
         self.stats.bytes_sent += len(data)

@@ -2,11 +2,13 @@
 
 One message is what a robot broadcasts in its transmit slot: its clock view of the team, the sequence
 numbers it acknowledges, new task records, and the bid entries that changed since its neighbours last
-acknowledged, and where it is. Layout (little-endian, version 5):
+acknowledged, where it is and where it is bound. Layout (little-endian, version 6):
 
     header    version u8, sender u8, seq u32, n_clocks u8
     position  x/y/z int16 cm: where the sender was when it sent (-32768 x 3: unknown), so that teammates
               can keep clear of it
+    goal      x/y/z int16 cm: where the sender was bound when it sent (-32768 x 3: nowhere, it holds
+              where it is), so that teammates can keep clear of its way too
     status    u8 flags: bit 0 set while the sender gives way to a teammate (so that the teammate need
               not give way to it, and two robots never wait on each other); bit 1 set while it has
               nothing left to do (it gives way to every teammate, and none waits on it); the other
@@ -30,6 +32,8 @@ Version 4 added the status byte: with positions heard 4 to 12 s late at 500 bit/
 that a teammate gives way can safely not give way itself (maptidal.mission.run's keep-clear rule).
 Version 5 added the idle bit: a robot that had finished parked where it was, and a teammate whose way
 lay through it waited on it for the rest of the mission.
+Version 6 added the goal: a teammate heard 10 s ago may have flown 2.5 m since, and the robot that kept
+clear of where it had been flew into it on its way (two robots in contact for minutes in a mission).
 Anything malformed raises MessageError with a short reason; decode never returns a half-read message.
 """
 
@@ -43,7 +47,7 @@ import numpy as np
 
 from maptidal.allocation.tasks import Task
 
-VERSION = 5
+VERSION = 6
 NO_WINNER = -1
 DONE = -2
 _WIRE_NONE = 255
@@ -83,8 +87,9 @@ class Message:
 
     clocks_ms: int64 per robot index (NEVER = -1); acks: (robot, seq) pairs; keys/winners/bids: the bid
     entries (winner NO_WINNER or DONE for the special codes; bids as float64 holding float32 values);
-    position: where the sender was, or None; giving_way: the sender was giving way to a teammate; idle:
-    the sender had nothing left to do (it then gives way to every teammate, and none waits on it)."""
+    position: where the sender was, or None; goal: where it was bound, or None; giving_way: the sender
+    was giving way to a teammate; idle: the sender had nothing left to do (it then gives way to every
+    teammate, and none waits on it)."""
 
     sender: int
     seq: int
@@ -95,6 +100,7 @@ class Message:
     winners: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     bids: np.ndarray = field(default_factory=lambda: np.zeros(0))
     position: tuple[float, float, float] | None = None  # the sender's, m (to the cm on the wire)
+    goal: tuple[float, float, float] | None = None  # where the sender was bound, m (to the cm)
     giving_way: bool = False
     idle: bool = False
 
@@ -110,7 +116,7 @@ def size_of(n_clocks: int, n_acks: int, n_tasks: int, n_entries: int, n_runs: in
     runs = min(n_tasks, 1) if n_runs is None else n_runs
     return (
         _HEADER.size
-        + _POSITION.size
+        + 2 * _POSITION.size
         + _STATUS.size
         + 4 * n_clocks
         + 1
@@ -175,6 +181,7 @@ def encode(message: Message) -> bytes:
         raise ValueError("at most 255 robots per message")
     parts = [_HEADER.pack(VERSION, message.sender, message.seq & 0xFFFFFFFF, len(clocks))]
     parts.append(_POSITION.pack(*_position_cm(message.position)))
+    parts.append(_POSITION.pack(*_position_cm(message.goal)))
     parts.append(_STATUS.pack((_GIVING_WAY if message.giving_way else 0) | (_IDLE if message.idle else 0)))
     parts.append((clocks + 1).astype("<u4").tobytes())
     parts.append(bytes([len(message.acks)]))
@@ -209,6 +216,12 @@ def _position_cm(position) -> tuple[int, int, int]:
     return tuple(int(v) for v in np.clip(np.round(values * 100.0), -32767, 32767))  # type: ignore[return-value]
 
 
+def _position_m(position_cm: tuple[int, int, int]) -> tuple[float, float, float] | None:
+    if position_cm == (_UNKNOWN_CM,) * 3:
+        return None
+    return tuple(v / 100.0 for v in position_cm)  # type: ignore[return-value]
+
+
 def _take(data: bytes, offset: int, size: int) -> int:
     if offset + size > len(data):
         raise MessageError("truncated", f"needs {offset + size} bytes, has {len(data)}")
@@ -225,10 +238,11 @@ def decode(data: bytes) -> Message:
     version, sender, seq, n_clocks = _HEADER.unpack_from(body, 0)
     if version != VERSION:
         raise MessageError("version", f"got {version}, speak {VERSION}")
-    start = _take(body, _HEADER.size, _POSITION.size + _STATUS.size)
-    position_cm = _POSITION.unpack_from(body, _HEADER.size)
-    position = None if position_cm == (_UNKNOWN_CM,) * 3 else tuple(v / 100.0 for v in position_cm)
-    (status,) = _STATUS.unpack_from(body, _HEADER.size + _POSITION.size)
+    start = _take(body, _HEADER.size, 2 * _POSITION.size + _STATUS.size)
+    position, goal = (
+        _position_m(_POSITION.unpack_from(body, _HEADER.size + at)) for at in (0, _POSITION.size)
+    )
+    (status,) = _STATUS.unpack_from(body, _HEADER.size + 2 * _POSITION.size)
     if status & ~(_GIVING_WAY | _IDLE):
         raise MessageError("malformed", f"status bits {status:#04x}")
     offset = _take(body, start, 4 * n_clocks)
@@ -278,6 +292,7 @@ def decode(data: bytes) -> Message:
         winners=winners,
         bids=bids,
         position=position,  # type: ignore[arg-type]
+        goal=goal,  # type: ignore[arg-type]
         giving_way=bool(status & _GIVING_WAY),
         idle=bool(status & _IDLE),
     )

@@ -44,6 +44,7 @@ METRICS = {
     "tasks_found": "tasks",
     "tasks_done": "tasks",
     "tasks_verified": "tasks",
+    "tasks_retired": "tasks",
     "pct_uninspected": "% of walls, occlusion on",
     "mean_views": "views per voxel",
     "mad": "MAD",

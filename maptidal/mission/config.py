@@ -18,7 +18,11 @@
     planner = "maptidal"   # where tasks come from: maptidal (discovered), voronoi or boustrophedon
     discovery = "map-aware"  # maptidal's discovery in the loop: map-aware (the robot's own map) or paper
     explore = true         # map-aware robots with no task fly to their map's frontier (false: they do not)
+    retire_taken = false   # map-aware robots retire tasks the team's views taken cover (true; off by default)
     explore_radius_m = 3.0 # ... within this of where each was launched (maptidal.exploration)
+    inspect_region = "walls"  # what a map-aware team inspects: "walls" (the box of the evaluated walls)
+                           # or "launch" (the exploration radius alone); inspect_box = [[x, y, z], [x, y, z]]
+                           # states the box instead
     dense_depth = true     # map-aware robots map each keyframe's dense stereo depth (false: keypoints only)
     dense_candidates_m = 0.0  # map-aware candidates from the dense depth too, one per cell this size (0: off)
     [[mission.events]]
@@ -81,6 +85,9 @@ MISSION_KEYS = {
     "explore_radius_m",
     "dense_depth",
     "dense_candidates_m",
+    "retire_taken",
+    "inspect_region",
+    "inspect_box",
 }
 # the [mission] keys that are not plain numbers, and what they must be
 SETTING_TYPES: dict[str, type] = {
@@ -92,6 +99,9 @@ SETTING_TYPES: dict[str, type] = {
     "perception_process": bool,
     "relocalise": bool,
     "explore": bool,
+    "retire_taken": bool,
+    "inspect_region": str,
+    "inspect_box": list,
     "dense_depth": bool,
 }
 EVENT_KEYS = {"time_s", "kind", "robot", "current", "duration_s", "robots"}
@@ -108,7 +118,7 @@ def load_mission(path: str | Path | None = None) -> tuple[Scenario, dict]:
     if not isinstance(table, dict) or set(table) - MISSION_KEYS:
         raise ValueError(f"{path}: [mission] takes only {', '.join(sorted(MISSION_KEYS))}")
     settings = {key: value for key, value in table.items() if key != "events"}
-    kinds = {str: "a string", int: "a whole number", bool: "true or false"}
+    kinds = {str: "a string", int: "a whole number", bool: "true or false", list: "[[x, y, z], [x, y, z]]"}
     for key, value in settings.items():
         wanted = SETTING_TYPES.get(key)
         # TOML's true and false are Python bools, which are ints too: only a bool setting takes them

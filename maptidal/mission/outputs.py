@@ -385,6 +385,8 @@ def mission_metrics(document: dict) -> dict:
         "tasks_done": sum(1 for t in tasks if t.get("completed")),
         # done and seen: the true view of the capture within the task's tolerances (None: not judged)
         "tasks_verified": sum(1 for t in tasks if t.get("verified")),
+        # retired unflown: the views the team had taken covered them (MissionParams.retire_taken)
+        "tasks_retired": sum(1 for t in tasks if t.get("retired")),
         "pct_uninspected": float(coverage.get("pct_uninspected", 100.0)),
         "mean_views": float(coverage.get("mean_views", 0.0)),
         "mad": coverage.get("mad"),  # None without captured views
@@ -415,7 +417,8 @@ def report_markdown(document: dict) -> str:
         summary_table(document),
         "",
         f"Tasks: {m['tasks_found']} found, {m['tasks_done']} said done by the robots, {m['tasks_verified']} "
-        "of them verified (the true view of the capture within the task's tolerances). Coverage of the "
+        "of them verified (the true view of the capture within the task's tolerances), "
+        f"{m['tasks_retired']} retired unflown (the views taken covered them). Coverage of the "
         f"verified views (occlusion on): {m['pct_uninspected']:.1f} % of the walls uninspected. Comms: "
         + (
             "unknown (no readable mission.json snapshot)."
@@ -582,6 +585,7 @@ def summary_table(document: dict) -> str:
         ("finished", str(m["finished"])),
         *([("ended", document["ending"])] if document.get("ending") else []),
         ("tasks found / done / verified", f"{m['tasks_found']} / {m['tasks_done']} / {m['tasks_verified']}"),
+        ("tasks retired unflown (covered)", str(m["tasks_retired"])),
         ("tasks inspected twice", str(document.get("duplicate_inspections", "n/a"))),
         # a snapshot of the auction, not a fault: on a slow channel two bundles may hold a task for a while
         ("tasks in two bundles at the end", str(document.get("allocation_conflicts", "n/a"))),

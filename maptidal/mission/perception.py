@@ -19,7 +19,7 @@ import queue
 import threading
 import time
 import traceback
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -27,7 +27,7 @@ import numpy as np
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
 from maptidal.executors import release_in_child, signals_held
 from maptidal.exploration import FrontierParams, explore_views
-from maptidal.map_discovery import RobotMap, discover_on_map
+from maptidal.map_discovery import RobotMap, discover_on_map, views_left_to_take
 from maptidal.perception.dense import dense_points
 from maptidal.perception.frontend import FrontEnd
 from maptidal.perception.recording import CameraPose
@@ -53,6 +53,12 @@ class FrameJob:
     teammates: np.ndarray | None = None
     # a robot with no task and exploring left asks for its next looks (maptidal.exploration)
     explore: ExploreRequest | None = None
+    # the keys of ``existing``, which of them are done (their views taken), and which are open on the
+    # robot's path: those are reviewed on its map at a keyframe, and the ones the views taken leave
+    # nothing to are retired (maptidal.map_discovery.views_left_to_take)
+    existing_keys: np.ndarray | None = None
+    existing_done: np.ndarray | None = None
+    to_review: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -90,6 +96,8 @@ class FrameResult:
     frontier: np.ndarray | None = None
     # with no look in ``frontier``: how many were left out only for being near a teammate
     held_for_teammates: int = 0
+    # the keys of the reviewed tasks (FrameJob.to_review) whose views the views taken leave nothing to
+    retired: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 def perceive(
@@ -106,7 +114,7 @@ def perceive(
         correction = (record.pose.position - job.dead_reckoned.position)[:2]
         sigma = front.odometry.sigma_m
     perception_s = time.perf_counter() - start
-    faces, new, rules = 0, np.zeros((0, 6)), None
+    faces, new, rules, retired = 0, np.zeros((0, 6)), None, np.zeros(0, np.int64)
     if keyframe is not None and len(keyframe.keyframe.mesh.faces):
         start = time.perf_counter()
         mesh = keyframe.keyframe.mesh
@@ -141,6 +149,7 @@ def perceive(
                     surface_points=surface,
                 )
                 new, rules = found.final, found.counts()
+                retired = _review(robot_map, job, discovery)
         except DiscoveryInputError:
             new = np.zeros((0, 6))  # a degenerate keyframe mesh finds nothing; the mission goes on
         discovery_s = time.perf_counter() - start
@@ -173,7 +182,19 @@ def perceive(
         rules,
         frontier,
         held_for_teammates,
+        retired,
     )
+
+
+def _review(robot_map: RobotMap, job: FrameJob, discovery: DiscoveryParams) -> np.ndarray:
+    """The keys of the job's tasks to review whose views the done ones leave nothing to, on the map."""
+    if job.to_review is None or job.existing_done is None or job.existing_keys is None:
+        return np.zeros(0, np.int64)
+    review, done = np.asarray(job.to_review, bool), np.asarray(job.existing_done, bool)
+    if not review.any() or not done.any():
+        return np.zeros(0, np.int64)
+    left = views_left_to_take(robot_map, job.existing[review], job.existing[done], discovery)
+    return np.asarray(job.existing_keys, np.int64)[review][~left]
 
 
 class InlinePerception:

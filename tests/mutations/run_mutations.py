@@ -1,6 +1,7 @@
 """Re-run the mutation lists of tests/README.md (M: physics, F: flight modes and estimator, V: done means
 seen, L: localisation, S: sharing discoveries, T: the closed tank, I: interrupts, B: the batched
-environment, N: the compiled flight stack): apply each mutation to the source, run its group's tests,
+environment, N: the compiled flight stack, W: keeping clear of a teammate's way, X: the box to inspect and
+retiring covered tasks): apply each mutation to the source, run its group's tests,
 record which test fails first, and restore the file. Every mutation must be killed.
 
     python tests/mutations/run_mutations.py            # all
@@ -40,6 +41,19 @@ BATCHED_TESTS = ["tests/test_batched.py"]
 NATIVE_TESTS = ["tests/test_native_flight.py"]
 DENSE_TESTS = ["tests/test_dense_depth.py", "tests/test_map_discovery.py", "tests/test_loop_discovery.py"]
 PLANNER_TESTS = ["tests/test_planners.py"]
+KEEP_CLEAR_TESTS = [
+    "tests/test_clearance.py",
+    "tests/test_allocation.py",
+    "tests/test_mission.py::test_a_robot_keeps_clear_of_the_way_a_teammate_said_it_was_bound",
+    "tests/test_mission.py::test_a_robot_keeps_clear_of_a_teammate_it_has_heard_from",
+]
+REGION_TESTS = [
+    "tests/test_map_discovery.py",
+    "tests/test_exploration.py",
+    "tests/test_mission.py::test_the_box_a_team_is_sent_to_inspect",
+    "tests/test_mission.py::test_a_robot_retires_the_task_its_review_found_covered_when_it_comes_to_it",
+    "tests/test_loop_discovery.py::test_perception_reviews_the_path_against_the_views_taken_on_its_map",
+]
 TESTS_OF_GROUP = {
     "M": TESTS,
     "F": FLIGHT_TESTS,
@@ -52,6 +66,8 @@ TESTS_OF_GROUP = {
     "N": NATIVE_TESTS,
     "D": DENSE_TESTS,
     "P": PLANNER_TESTS,
+    "W": KEEP_CLEAR_TESTS,
+    "X": REGION_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -1231,6 +1247,133 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
     "P5": (
         "no merging of coinciding viewpoints",
         [("maptidal/mission/run.py", "        if not duplicate:\n", "        if True:\n")],
+    ),
+    "W1": (
+        "a teammate's way entered only through its end balls, never the cylinder's side",
+        [
+            (
+                "maptidal/mission/clearance.py",
+                "                entries.append(float(crossing))\n",
+                "                pass\n",
+            )
+        ],
+    ),
+    "W2": (
+        "a teammate's goal ignored: a ball where it was",
+        [
+            (
+                "maptidal/mission/run.py",
+                "        goal = agent.peer_goals.get(peer)\n",
+                "        goal = None\n",
+            )
+        ],
+    ),
+    "W3": (
+        "a teammate taken to have reached its goal whatever the message's age",
+        [("maptidal/mission/run.py", "min(1.0, reach / distance) * to_goal", "to_goal")],
+    ),
+    "W4": (
+        "the goal left out of the messages",
+        [
+            (
+                "maptidal/allocation/messages.py",
+                "    parts.append(_POSITION.pack(*_position_cm(message.goal)))\n",
+                "    parts.append(_POSITION.pack(*_position_cm(None)))\n",
+            )
+        ],
+    ),
+    "W5": (
+        "a new goal not news",
+        [
+            (
+                "maptidal/allocation/agent.py",
+                "            or _moved(self._sent_goal, self.goal, self.params.goal_news_m)\n",
+                "",
+            )
+        ],
+    ),
+    "W6": (
+        "a robot inside a teammate's way backs out of the way, not only of its ball",
+        [
+            (
+                "maptidal/mission/clearance.py",
+                "        offset = position - axis[0]\n",
+                "        offset = position - nearest_on_axis(position, axis)\n",
+            )
+        ],
+    ),
+    "X1": (
+        "faces outside the box to inspect yield candidates",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "    if params.region_box is not None:\n        inside = in_box(",
+                "    if False:\n        inside = in_box(",
+            )
+        ],
+    ),
+    "X2": (
+        "rule 5 counts cells outside the box",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "        cells = cells[in_box(cells, params.region_box, params.plane_tolerance_m)]\n",
+                "        pass\n",
+            )
+        ],
+    ),
+    "X3": (
+        "exploration ignores the box",
+        [
+            (
+                "maptidal/exploration.py",
+                "        outside |= x[:, None, None] | y[None, :, None] | z[None, None, :]\n",
+                "",
+            )
+        ],
+    ),
+    "X4": (
+        "the review counts no view as taken",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "    covered = _covered(taken, cells, discovery.camera)\n",
+                "    covered = np.zeros(len(cells), bool)\n",
+            )
+        ],
+    ),
+    "X5": (
+        "the review counts the open tasks off the path as taken",
+        [
+            (
+                "maptidal/mission/perception.py",
+                "    review, done = np.asarray(job.to_review, bool), np.asarray(job.existing_done, bool)\n",
+                "    review, done = np.asarray(job.to_review, bool), ~np.asarray(job.to_review, bool)\n",
+            )
+        ],
+    ),
+    "X6": (
+        "a covered task flown all the same",
+        [
+            (
+                "maptidal/mission/run.py",
+                (
+                    "            if key in robot.covered:\n                self._retire(robot, key, now)\n"
+                    "                return\n            task = next("
+                ),
+                "            task = next(",
+            )
+        ],
+    ),
+    "X7": (
+        "the box of the walls cut at half the water's depth",
+        [
+            (
+                "maptidal/mission/run.py",
+                "    return np.stack([vertices.min(axis=0), vertices.max(axis=0)])",
+                "    return np.stack([vertices.min(axis=0), vertices.max(axis=0) * [1, 1, 0.5]])",
+            )
+        ],
     ),
 }
 
