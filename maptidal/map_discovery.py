@@ -86,7 +86,8 @@ fewer than ``min_new_points`` cells of the robot's map (now) that no view taken 
 before it is flown: it is marked done in the auction, with a ``retired`` event, and no image. Only views
 taken count, never those planned, so two open tasks cannot retire each other; and only the cell count,
 not rule 5's share, since a view at the top of a wall adds only a strip (rule 5's exception), which the
-share would take for a repeat.
+share would take for a repeat. The mission does this only when asked (``retire_taken``, off by default):
+on the map, where occlusion is not counted, the views taken claim more than their images show.
 
 Every number is a parameter of :class:`MapAwareParams`; the defaults are chosen by the reasoning given
 beside them, not fitted to a tank. Pure numpy and scipy: it runs on a real robot's landmarks as well.
