@@ -285,16 +285,15 @@ class MapAwareParams:
 SURFACE_BAND_M = 0.15
 
 
-def check_box(box, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """A box given as its lowest and highest corners, checked: two rows of three finite numbers, the
-    first no higher than the second on any axis (raises ValueError naming ``name`` otherwise)."""
+def check_box(box, name: str) -> None:
+    """Check a box given as its lowest and highest corners: two rows of three finite numbers, the first
+    no higher than the second on any axis (raises ValueError naming ``name`` otherwise)."""
     try:
         corners = np.asarray(box, float)
     except (TypeError, ValueError):
         corners = np.zeros(0)
     if corners.shape != (2, 3) or not np.isfinite(corners).all() or (corners[0] > corners[1]).any():
         raise ValueError(f"{name} must be [[x, y, z], [x, y, z]], the lowest corner first, got {box!r}")
-    return corners[0], corners[1]
 
 
 def in_box(points: np.ndarray, box, margin_m: float = 0.0) -> np.ndarray:

@@ -351,8 +351,12 @@ def inspection_box(params: MissionParams, tank) -> np.ndarray | None:
         return np.asarray(params.inspect_box, float)
     if params.inspect_region == "launch":
         return None
-    vertices = np.asarray(tank.evaluated_surface().vertices, float)
-    return np.stack([vertices.min(axis=0), vertices.max(axis=0)])
+    return np.asarray(tank.evaluated_surface().bounds, float)
+
+
+def _corners(box: np.ndarray) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """A box's two corners as plain tuples of floats (the form the frozen parameter classes hold)."""
+    return tuple(tuple(float(v) for v in corner) for corner in np.asarray(box, float))  # type: ignore[return-value]
 
 
 def reachable(tank, rows: np.ndarray, standoff_m: float) -> np.ndarray:
@@ -660,7 +664,7 @@ class Mission:
             # each robot inspects the region it explores: within the exploration radius of its launch,
             # and in the box it was sent to inspect
             box = inspection_box(params, self.scenario.tank)
-            region_box = None if box is None else tuple(tuple(float(v) for v in corner) for corner in box)
+            region_box = None if box is None else _corners(box)
             maps = {
                 name: RobotMap(
                     dataclasses.replace(
@@ -676,7 +680,7 @@ class Mission:
             # they keep from the walls around it
             if box is not None:
                 reach = params.discovery.standoff + map_params.clearance_m
-                grown = tuple(tuple(float(v) for v in corner) for corner in (box[0] - reach, box[1] + reach))
+                grown = _corners([box[0] - reach, box[1] + reach])
                 self.explore_params = dataclasses.replace(params.frontier, explore_box=grown)
         self.perception.configure(fronts, params.discovery, maps)
         # the robots' cameras render on a thread of their own, beside the physics (MuJoCo lets go of
@@ -1099,7 +1103,7 @@ class Mission:
         review = {}
         if self.params.reviewing:
             keys = agent.keys.copy()
-            done = agent.z[: len(keys)] == DONE
+            done = agent.z == DONE
             path = np.isin(keys, agent.path_keys()) & ~np.isin(keys, list(robot.skipped)) & ~done
             review = {"existing_keys": keys, "existing_done": done, "to_review": path}
         job = FrameJob(

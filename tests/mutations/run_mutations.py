@@ -1370,8 +1370,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/mission/run.py",
-                "    return np.stack([vertices.min(axis=0), vertices.max(axis=0)])",
-                "    return np.stack([vertices.min(axis=0), vertices.max(axis=0) * [1, 1, 0.5]])",
+                "    return np.asarray(tank.evaluated_surface().bounds, float)",
+                "    return np.asarray(tank.evaluated_surface().bounds, float) * [[1, 1, 1], [1, 1, 0.5]]",
             )
         ],
     ),
