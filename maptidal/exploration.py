@@ -20,18 +20,23 @@ On the robot's own :class:`~maptidal.map_discovery.RobotMap`, on its voxel grid:
   sent to inspect: in the loop, the box the structure lies in grown by the water its views stand in);
 - **unknown**: anything else.
 
-A **frontier** is a free or looked voxel beside an unknown one. Each frontier stands for a candidate look,
-made from where the vehicle's centre can stand: the free voxel nearest the frontier whose every voxel
-within ``free_margin_m`` is free too (water the robot has seen through, not looked-at water, which may hide
-a bare surface), with free water ``floor_clearance_m`` beneath it (the floor, seen at a grazing angle, has
-few landmarks), ``clearance_m`` from every landmark (the hull, whichever way it turns) and from the
-surface, one per ``cell_m`` cell, looking along one of ``yaws`` headings with the camera level. A
-look's **gain** is the unknown volume its rays reach (the camera's field of view, ``view_range_m`` deep,
-each ray ending at the first occupied or outside voxel), its **utility** that gain discounted by the
-distance to fly, ``gain * exp(-distance / distance_scale_m)`` (Gonzalez-Banos and Latombe 2002). Looks
-near a teammate (where its last message put it) or near a place this robot surveyed already are left out:
-the simplest coordination, which needs nothing the team does not already send. Looks that reveal less
-than ``min_gain_m3`` are not worth a trip; a robot with none left has explored.
+Only unknown voxels inside ``gain_box`` count (in the loop, the box the structure to inspect lies in,
+grown by map-aware discovery's plane tolerance): water outside it may be flown through and stood in, but
+holds nothing the robot was sent to inspect, so revealing it is worth nothing. Without the box, every
+unknown voxel counts.
+
+A **frontier** is a free or looked voxel beside a counted unknown one. Each frontier stands for a candidate
+look, made from where the vehicle's centre can stand: the free voxel nearest the frontier whose every voxel
+within ``free_margin_m`` is free too (water the robot has seen through, not looked-at water, which may hide a
+bare surface), with free water ``floor_clearance_m`` beneath it (the floor, seen at a grazing angle, has few
+landmarks), ``clearance_m`` from every landmark (the hull, whichever way it turns) and from the surface, one
+per ``cell_m`` cell, looking along one of ``yaws`` headings with the camera level. A look's **gain** is the
+unknown volume its rays reach (the camera's field of view, ``view_range_m`` deep, each ray ending at the first
+occupied or outside voxel), its **utility** that gain discounted by the distance to fly, ``gain *
+exp(-distance / distance_scale_m)`` (Gonzalez-Banos and Latombe 2002). Looks near a teammate (where its last
+message put it) or near a place this robot surveyed already are left out: the simplest coordination, which
+needs nothing the team does not already send. Looks that reveal less than ``min_gain_m3`` are not worth a
+trip; a robot with none left has explored.
 
 Pure numpy and scipy, with no tank model and no simulator truth: it runs on a real robot's map as well.
 """
@@ -103,6 +108,12 @@ class FrontierParams:
     explore_radius_m: float | None = 3.0
     # ... and within this box, lowest and highest corners (None: no box)
     explore_box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    # the unknown volume a look's gain counts, and the frontier borders: inside this box, lowest and
+    # highest corners (None: everywhere). In the loop, the box to inspect: unknown water in the box grown
+    # for the views' stands (explore_box) but outside the structure's box has nothing to inspect in it;
+    # counted, it sent robots looking away from the structure into the open tank, two surveys in three of
+    # session 31's default missions (README, "Exploring the map's frontier")
+    gain_box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     max_views: int = 5
 
     def __post_init__(self) -> None:
@@ -133,8 +144,9 @@ class FrontierParams:
             raise ValueError(
                 f"exploration explore_radius_m must be positive or None, got {self.explore_radius_m!r}"
             )
-        if self.explore_box is not None:
-            check_box(self.explore_box, "exploration explore_box")
+        for name in ("explore_box", "gain_box"):
+            if getattr(self, name) is not None:
+                check_box(getattr(self, name), f"exploration {name}")
         if self.hfov_deg >= 180 or self.vfov_deg >= 180:
             raise ValueError("exploration fields of view must be under 180 deg")
         for name in ("rays_across", "rays_up", "yaws", "max_candidates", "max_views"):
@@ -150,15 +162,28 @@ class FrontierParams:
 @dataclass
 class VoxelStates:
     """The map's voxels on a dense grid: ``states[i, j, k]`` is UNKNOWN, FREE, LOOKED, OCCUPIED or OUTSIDE
-    for the voxel of integer key ``origin + (i, j, k)``, of ``size`` m."""
+    for the voxel of integer key ``origin + (i, j, k)``, of ``size`` m. An unknown voxel counts towards a
+    look's gain and the frontier only when its centre lies in ``gain_box`` (None: every one)."""
 
     states: np.ndarray
     origin: np.ndarray
     size: float
+    gain_box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
 
     def centres(self, index: np.ndarray) -> np.ndarray:
         """The world centres of grid cells ``index`` ``(N, 3)``."""
         return (np.asarray(index) + self.origin + 0.5) * self.size
+
+    def counted(self, pad: int = 0) -> np.ndarray:
+        """Which cells of the grid, padded by ``pad`` cells each way, have their centre in ``gain_box``
+        (all, without one): a boolean array of the padded grid's shape."""
+        shape = tuple(n + 2 * pad for n in self.states.shape)
+        if self.gain_box is None:
+            return np.ones(shape, bool)
+        low, high = (np.asarray(corner, float) for corner in self.gain_box)
+        axes = [(np.arange(n) - pad + self.origin[d] + 0.5) * self.size for d, n in enumerate(shape)]
+        x, y, z = ((axis >= low[d]) & (axis <= high[d]) for d, axis in enumerate(axes))
+        return x[:, None, None] & y[None, :, None] & z[None, None, :]
 
 
 def voxel_states(
@@ -185,7 +210,7 @@ def voxel_states(
         cells = landmarks[inside] + np.array(offset) - margin - low
         keep = np.all((cells >= 0) & (cells < shape), axis=1)
         states[tuple(cells[keep].T)] = OCCUPIED
-    grid = VoxelStates(states, low, size)
+    grid = VoxelStates(states, low, size, params.gain_box)
     # the grid's axes in the world: the tests below are separable by axis
     axes = [(np.arange(n) + low[d] + 0.5) * size for d, n in enumerate(shape)]
     outside = np.zeros(shape, bool)
@@ -204,9 +229,10 @@ def voxel_states(
 
 
 def _frontier(grid: VoxelStates) -> np.ndarray:
-    """The grid indices ``(N, 3)`` of free or looked voxels with an unknown face neighbour."""
+    """The grid indices ``(N, 3)`` of free or looked voxels with a face neighbour unknown and counted
+    (off the grid, a voxel is unknown)."""
     states = grid.states
-    padded = np.pad(states, 1, constant_values=UNKNOWN)
+    padded = np.where(grid.counted(pad=1), np.pad(states, 1, constant_values=UNKNOWN), OUTSIDE)
     beside = np.zeros(states.shape, bool)
     n0, n1, n2 = states.shape
     for axis in range(3):
@@ -251,8 +277,8 @@ def look_gains(
 ) -> np.ndarray:
     """The unknown volume (m^3) each look sees: ``positions`` ``(N, 3)`` by ``yaws`` ``(Y,)`` gives
     ``(N, Y)``. Each ray is sampled every voxel, from half a voxel out, to ``view_range_m``, and ends at
-    its first occupied or outside voxel; an unknown voxel counts once per look however many rays reach
-    it."""
+    its first occupied or outside voxel; an unknown voxel counts, if in the grid's ``gain_box``, once per
+    look however many rays reach it."""
     positions = np.asarray(positions, float).reshape(-1, 3)
     yaws = np.asarray(yaws, float).reshape(-1)
     if len(positions) == 0:
@@ -282,6 +308,8 @@ def look_gains(
     states = grid.states.ravel()[flat]
     blocked = np.maximum.accumulate(states >= OCCUPIED, axis=-1)  # occupied or outside
     seen_unknown = (states == UNKNOWN) & ~blocked
+    if grid.gain_box is not None:
+        seen_unknown &= grid.counted().ravel()[flat]
     looks = len(positions) * len(yaws)
     look = np.broadcast_to(np.arange(looks).reshape(len(positions), len(yaws), 1, 1), states.shape)
     # distinct voxels per look: one integer per (look, voxel), then count the unique ones by look

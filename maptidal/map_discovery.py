@@ -338,7 +338,11 @@ def _packed(keys: np.ndarray) -> np.ndarray:
 def unpack_voxels(packed) -> np.ndarray:
     """The integer voxel coordinates ``(N, 3)`` of packed voxel keys (as in :attr:`RobotMap.free_voxels`),
     in ascending key order."""
-    keys = np.sort(np.fromiter(packed, np.int64, len(packed)))
+    return _unpacked(np.sort(np.fromiter(packed, np.int64, len(packed))))
+
+
+def _unpacked(keys: np.ndarray) -> np.ndarray:
+    # the integer voxel coordinates (N, 3) of packed keys (_packed), in their order
     mask = (1 << 21) - 1
     return np.column_stack([(keys >> 42) & mask, (keys >> 21) & mask, keys & mask]) - (1 << 20)
 
@@ -827,7 +831,9 @@ def coverage_cells(points: np.ndarray, params: MapAwareParams) -> np.ndarray:
     """The centres of the ``coverage_voxel_m`` cells that hold map ``points``, rule 5's count: those in
     the region to inspect (``region_box``, grown as rule 1 grows it), since structure outside it is no
     one's job, and a view is not new for showing it."""
-    cells = (np.unique(voxel_keys(points, params.coverage_voxel_m), axis=0) + 0.5) * params.coverage_voxel_m
+    # unique on the packed keys: the order of np.unique(axis=0), at a fraction of its cost
+    keys = _unpacked(np.unique(_packed(voxel_keys(points, params.coverage_voxel_m))))
+    cells = (keys + 0.5) * params.coverage_voxel_m
     if params.region_box is not None:
         cells = cells[in_box(cells, params.region_box, params.plane_tolerance_m)]
     return cells

@@ -712,6 +712,29 @@ def test_a_task_given_up_passes_to_another_robot_as_if_its_holder_could_not_do_i
     assert report.paths == sequential_greedy(equipped, changed, AuctionParams()).paths
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_a_robot_standing_down_leaves_its_tasks_to_the_team_until_it_resumes(seed):
+    """stand_down: robot 0 releases every task and bids on none. The team settles on the allocation the
+    sequential greedy gives robots 1 and 2 alone; robot 0, resumed, takes its share again, and the team
+    settles on the sequential greedy of all three."""
+    robots, tasks = random_instance(3, 12, seed)
+    simulation = AuctionSimulation(robots, tasks, IDEAL, AuctionParams())
+    simulation.advance_to(400.0)
+    lost = simulation.agents[0]
+    assert lost.path_keys() and lost.stand_down(400.0) and not lost.stand_down(401.0)
+    assert lost.path_keys() == [] and not (lost.z == 0).any()
+    simulation.advance_to(1200.0)
+    report = simulation.report(converged=True)
+    assert report.conflicts == 0 and report.disagreements == 0 and report.paths[0] == []
+    others = sequential_greedy([r for r in robots if r.index], tasks, AuctionParams())
+    assert {k: v for k, v in report.paths.items() if k} == others.paths
+    assert lost.resume(1200.0) and not lost.resume(1201.0)
+    simulation.advance_to(2000.0)
+    report = simulation.report(converged=True)
+    assert report.conflicts == 0 and report.disagreements == 0 and report.paths[0]
+    assert report.paths == sequential_greedy(robots, tasks, AuctionParams()).paths
+
+
 def test_an_agent_learns_where_its_teammates_are_from_their_messages():
     from maptidal.allocation.agent import CBBAAgent
     from maptidal.allocation.scoring import RobotProfile

@@ -29,15 +29,28 @@ from maptidal.map_discovery import MapAwareParams, RobotMap, _packed, voxel_keys
 VOXEL = 0.15
 
 
-def _random_grid(seed: int, shape=(9, 8, 7)) -> VoxelStates:
+def _random_grid(seed: int, shape=(9, 8, 7), gain_box=None) -> VoxelStates:
     rng = np.random.default_rng(seed)
     states = rng.choice([UNKNOWN, FREE, FREE, FREE, LOOKED, OCCUPIED, OUTSIDE], size=shape).astype(np.int8)
-    return VoxelStates(states, np.array([-4, 3, -2]), VOXEL)
+    return VoxelStates(states, np.array([-4, 3, -2]), VOXEL, gain_box)
 
 
+def _in_gain_box(grid: VoxelStates, cell) -> bool:
+    """Whether grid cell ``cell`` (on or off the grid) has its centre in the grid's gain box, literally."""
+    if grid.gain_box is None:
+        return True
+    centre = [(cell[d] + grid.origin[d] + 0.5) * grid.size for d in range(3)]
+    return all(grid.gain_box[0][d] <= centre[d] <= grid.gain_box[1][d] for d in range(3))
+
+
+# a box that cuts the random grid (world x -0.6 to 0.75, y 0.45 to 1.65, z -0.3 to 0.75) on every axis
+GAIN_BOX = ((-0.3, 0.7, -0.2), (0.4, 1.5, 0.8))
+
+
+@pytest.mark.parametrize("gain_box", [None, GAIN_BOX])
 @pytest.mark.parametrize("seed", range(3))
-def test_the_frontier_is_every_free_or_looked_voxel_beside_an_unknown_one(seed):
-    grid = _random_grid(seed)
+def test_the_frontier_is_every_free_or_looked_voxel_beside_a_counted_unknown_one(seed, gain_box):
+    grid = _random_grid(seed, gain_box=gain_box)
     states = grid.states
     expected = set()
     for i, j, k in np.ndindex(*states.shape):
@@ -46,10 +59,13 @@ def test_the_frontier_is_every_free_or_looked_voxel_beside_an_unknown_one(seed):
         for d in ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)):
             a, b, c = i + d[0], j + d[1], k + d[2]
             inside = 0 <= a < states.shape[0] and 0 <= b < states.shape[1] and 0 <= c < states.shape[2]
-            if not inside or states[a, b, c] == UNKNOWN:  # off the grid is unknown
+            unknown = not inside or states[a, b, c] == UNKNOWN  # off the grid is unknown
+            if unknown and _in_gain_box(grid, (a, b, c)):
                 expected.add((i, j, k))
                 break
     assert {tuple(row) for row in _frontier(grid).tolist()} == expected
+    if gain_box is not None:  # the box leaves some of the frontier out
+        assert len(expected) < len(_frontier(_random_grid(seed)))
 
 
 @pytest.mark.parametrize("radius", [0.1, 0.2, 0.35])
@@ -90,17 +106,18 @@ def _literal_gain(grid: VoxelStates, position, yaw, params: FrontierParams) -> f
                 state = grid.states[tuple(cell)]
                 if state in (OCCUPIED, OUTSIDE):
                     break
-                if state == UNKNOWN:
+                if state == UNKNOWN and _in_gain_box(grid, cell):
                     seen.add(tuple(cell))
                 depth += grid.size
     return len(seen) * grid.size**3
 
 
+@pytest.mark.parametrize("gain_box", [None, ((-1.0, -0.5, -2.0), (1.5, 2.5, 0.5))])
 @pytest.mark.parametrize("seed", range(3))
-def test_a_looks_gain_is_the_unknown_volume_its_rays_reach_before_a_surface(seed):
+def test_a_looks_gain_is_the_unknown_volume_its_rays_reach_before_a_surface(seed, gain_box):
     rng = np.random.default_rng(seed)
     states = rng.choice([UNKNOWN, FREE, LOOKED, OCCUPIED], p=[0.45, 0.35, 0.15, 0.05], size=(30, 30, 20))
-    grid = VoxelStates(states.astype(np.int8), np.array([-15, -15, -10]), VOXEL)
+    grid = VoxelStates(states.astype(np.int8), np.array([-15, -15, -10]), VOXEL, gain_box)
     params = FrontierParams(view_range_m=1.5, rays_across=4, rays_up=3)
     positions = rng.uniform(-0.8, 0.8, size=(3, 3))
     yaws = np.array([0.3, 2.0, -2.5])
@@ -108,6 +125,9 @@ def test_a_looks_gain_is_the_unknown_volume_its_rays_reach_before_a_surface(seed
     for n, position in enumerate(positions):
         for y, yaw in enumerate(yaws):
             assert gains[n, y] == pytest.approx(_literal_gain(grid, position, yaw, params), rel=1e-9)
+    if gain_box is not None:  # the box leaves some unknown voxels out
+        everywhere = look_gains(dataclasses.replace(grid, gain_box=None), positions, yaws, params)
+        assert (gains <= everywhere).all() and (gains < everywhere).any()
 
 
 def _room() -> np.ndarray:
@@ -233,6 +253,27 @@ def test_teammates_places_surveyed_and_the_region_bound_the_looks():
     assert beyond.any() and (states[beyond] == OUTSIDE).all() and not (states[~beyond] == OUTSIDE).all()
 
 
+def test_a_look_is_worth_only_what_it_reveals_of_the_gain_box():
+    # a robot at the middle of a closed room has looked at one wall (+x). Counting every unknown voxel,
+    # its best look turns round, to the room's unseen half; counting only the box against that wall (the
+    # structure it was sent to inspect), every look reveals a corner of that box left out of the first
+    robot_map = RobotMap()
+    camera = np.array([-0.5, 0.0, 1.0])
+    walls = _room()
+    _look(robot_map, camera, 0.0, walls)
+    everywhere = explore_views(robot_map, camera, FrontierParams(), launch=camera)
+    assert math.cos(everywhere[0, 3]) < 0
+    box = ((1.0, -2.0, 0.0), (2.0, 2.0, 2.0))
+    params = FrontierParams(gain_box=box)
+    views = explore_views(robot_map, camera, params, launch=camera)
+    assert len(views) and (np.cos(views[:, 3]) > -1e-9).all()
+    grid = voxel_states(robot_map, params, camera, pad_m=params.view_range_m)
+    for x, y, z, yaw, gain, _ in views:
+        # within two voxels: the gain's rays are sampled in float32, and a sample may fall on a voxel's face
+        assert gain == pytest.approx(_literal_gain(grid, (x, y, z), yaw, params), abs=2 * VOXEL**3)
+        assert params.min_gain_m3 <= gain < everywhere[0, 4]
+
+
 def test_an_empty_or_lost_map_gives_no_look():
     assert explore_views(RobotMap(), np.zeros(3)).shape == (0, 6)
     robot_map = RobotMap()
@@ -252,6 +293,7 @@ def test_an_empty_or_lost_map_gives_no_look():
         {"hfov_deg": 200.0},
         {"wall_margin_voxels": -1},
         {"explore_box": ((0, 0, 0), (1, 1, float("nan")))},
+        {"gain_box": ((0, 0, 0), (1, -1, 1))},
     ],
 )
 def test_bad_exploration_settings_are_refused(bad):

@@ -142,6 +142,90 @@ def test_by_default_a_robot_lost_on_its_way_flies_on_to_the_view(tmp_path):
     assert not [e for e in read_events(tmp_path) if e["kind"] == "gave_up"]
 
 
+def test_a_robot_still_lost_after_its_recovery_stands_down_until_it_has_a_fix(tmp_path):
+    # lost on its way to a view, home and swept, and still lost: it cannot tell when it reaches any view,
+    # so it releases its tasks to its teammate and flies none; found again, it bids again
+    with mission_at_rest(tmp_path, duration_s=10.0) as (mission, params):
+        assert params.lost_stand_down
+        robot = mission.robots["rov1"]
+        agent = mission.auction.agents[robot.index]
+        teammate = mission.auction.agents[mission.robots["rov0"].index]
+        mission._start_exploring(robot, 0.0)
+        task = agent.discover_task([-1.0, -0.6, 1.0], [1.0, 0.0, 0.0], now_s=0.0)
+        agent.build_bundle(0.0)
+        robot.activity = "idle"
+        mission._advance_activity(robot, 1.0)
+        assert robot.activity == "fly" and robot.task_key == task.key
+        robot.visual_updates, robot.position_sigma_m = 1, 0.08
+        assert not mission._lost(robot, 1.0)
+        lost_at = 1.0 + params.lost_after_s + 0.1
+        mission._reference(robot, lost_at)
+        assert robot.lost and not agent.standing_down
+        # within its recovery it holds its task
+        mission._reference(robot, lost_at + robot.recovery.duration - 0.1)
+        assert not agent.standing_down and agent.path_keys() == [task.key]
+        # its recovery over, still lost: it stands down, and leaves its task
+        done_at = lost_at + robot.recovery.duration + 0.1
+        mission._reference(robot, done_at)
+        assert agent.standing_down and agent.path_keys() == [] and robot.activity == "idle"
+        assert task.key not in robot.skipped  # not given up for good
+        # it holds where it is and sweeps there: it does not fly home on an estimate that far off
+        estimate = mission._estimate(robot).position
+        assert len(robot.recovery.legs) == 3
+        for t in np.linspace(0.0, robot.recovery.duration, 7):
+            assert robot.recovery.at(t).position == pytest.approx(estimate)
+        # no task, and no look, while it stands down, though its map has a look worth a trip
+        robot.frontier, robot.frontier_frame_s = np.array([[-1.0, 0.5, 1.0, 0.0, 2.0, 1.5]]), done_at
+        robot.survey_ended_s = 0.0
+        mission._advance_activity(robot, done_at)
+        assert robot.activity == "idle"
+        # the teammate hears the release and wins the task; the mission does not wait on the lost robot
+        mission.auction.advance_to(done_at + 30.0)
+        assert teammate.path_keys() == [task.key]
+        # found again, it bids again
+        robot.visual_updates = 2
+        assert not mission._lost(robot, done_at + 31.0) and not agent.standing_down
+    events = [e for e in read_events(tmp_path) if e.get("robot") == "rov1"]
+    stood = [e for e in events if e["kind"] == "stood_down"]
+    assert len(stood) == 1 and stood[0]["left"] == "fly"
+    assert stood[0]["lost_s"] == pytest.approx(done_at - lost_at, abs=0.01)
+    assert [e["kind"] for e in events].count("resumed") == 1
+
+
+def test_a_robot_lost_for_good_is_not_waited_for_and_the_ending_says_so(tmp_path):
+    with mission_at_rest(tmp_path, duration_s=10.0) as (mission, _):
+        lost, able = mission.robots["rov1"], mission.robots["rov0"]
+        task = mission.auction.agents[able.index].discover_task([-1.0, 0.3, 1.0], [1.0, 0.0, 0.0], now_s=0.0)
+        mission.auction.agents[able.index].mark_done(task.key, 0.0)
+        able.explored = True
+        lost.explored = False
+        assert not mission._finished()  # the lost robot has not explored and stands for now
+        mission.auction.agents[lost.index].stand_down(5.0)
+        assert mission._finished()
+        assert "rov1 lost, standing down" in mission.ending(5.0, True)
+        lost.explored = able.explored = False
+        assert "rov1 lost, standing down" in mission.ending(5.0, False)
+        mission.auction.agents[able.index].stand_down(5.0)
+        assert not mission._finished()  # nobody left able to work
+
+
+def test_without_standing_down_a_lost_robot_keeps_its_task(tmp_path):
+    with mission_at_rest(tmp_path, duration_s=10.0, lost_stand_down=False) as (mission, params):
+        robot = mission.robots["rov1"]
+        agent = mission.auction.agents[robot.index]
+        mission._start_exploring(robot, 0.0)
+        task = agent.discover_task([-1.0, -0.6, 1.0], [1.0, 0.0, 0.0], now_s=0.0)
+        agent.build_bundle(0.0)
+        robot.activity = "idle"
+        mission._advance_activity(robot, 1.0)
+        robot.visual_updates, robot.position_sigma_m = 1, 0.08
+        mission._lost(robot, 1.0)
+        lost_at = 1.0 + params.lost_after_s + 0.1
+        mission._reference(robot, lost_at)
+        mission._reference(robot, lost_at + 2 * robot.recovery.duration + 0.2)
+        assert robot.lost and not agent.standing_down and agent.path_keys() == [task.key]
+
+
 def test_a_perturbed_motion_model_is_heavier_and_less_damped():
     model = MotionModel((10.0, 20.0, 30.0), (1.0, 2.0, 3.0), (4.0, 5.0, 6.0), net_buoyancy_n=2.0)
     off = model.perturbed(0.3)

@@ -245,6 +245,9 @@ def test_each_keyframes_dense_depth_maps_the_walls_where_they_are(tmp_path, dens
         np.testing.assert_allclose(region.region_box, box)
         reach = params.discovery.standoff + region.clearance_m
         np.testing.assert_allclose(mission.explore_params.explore_box, [box[0] - reach, box[1] + reach])
+        # ... and counts in a look's gain what it reveals of the box, grown as rule 1 grows it
+        tolerance = region.plane_tolerance_m
+        np.testing.assert_allclose(mission.explore_params.gain_box, [box[0] - tolerance, box[1] + tolerance])
     # with dense candidates a keyframe has more candidates than its mesh has faces; without, as many
     keyframes = [e for e in read_events(tmp_path) if e["kind"] == "keyframe" and "rules" in e]
     assert keyframes

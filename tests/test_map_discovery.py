@@ -864,3 +864,14 @@ def test_a_lift_does_not_take_a_viewpoint_through_a_wall():
     assert free.tolist() == [True, False, True] and lifted == 1
     assert np.array_equal(moved[:2], rows[:2])
     assert np.array_equal(moved[2, [0, 1, 3, 4, 5]], rows[2, [0, 1, 3, 4, 5]]) and 0.35 <= moved[2, 2] <= 0.55
+
+
+def test_rule_5s_cells_are_every_occupied_cell_once_in_order():
+    # against a literal set of floor(point / size), negative coordinates and repeats included
+    rng = np.random.default_rng(4)
+    points = np.vstack([rng.uniform(-3.0, 3.0, (400, 3)), rng.uniform(-0.2, 0.2, (50, 3))])
+    params = MapAwareParams()
+    size = params.coverage_voxel_m
+    literal = sorted({tuple(int(v) for v in np.floor(p / size)) for p in points})
+    np.testing.assert_allclose(coverage_cells(points, params), (np.array(literal) + 0.5) * size)
+    assert coverage_cells(np.zeros((0, 3)), params).shape == (0, 3)

@@ -174,6 +174,9 @@ class CBBAAgent:
         self._task_counter = 0
         self.last_change_s = 0.0
         self.alive = True
+        # standing down (the mission sets it, ``stand_down``): it bids on nothing and holds nothing, for
+        # now, while it cannot fly to any task (a robot that has lost its position for good)
+        self.standing_down = False
         self.last_message_had_content = False
         self._bids_lowered = False  # some bid fell or was withdrawn since the last bundle check
 
@@ -291,6 +294,28 @@ class CBBAAgent:
         self.last_change_s = now_s
         return True
 
+    def stand_down(self, now_s: float) -> bool:
+        """Stop bidding for now and release every task held: the robot cannot fly to any task (it does not
+        know where it is). The release spreads like any lost bid, so teammates win the tasks. Unlike
+        ``give_up``, not for good: ``resume`` bids again. Returns False when already standing down."""
+        if self.standing_down:
+            return False
+        self.standing_down = True
+        mine = [j for j in self.bundle if self.z[j] == self.index]
+        if mine:
+            self._set(np.array(mine), NO_WINNER, 0.0)
+        self._drop_from_bundle(set(self.bundle))
+        self.last_change_s = now_s
+        return True
+
+    def resume(self, now_s: float) -> bool:
+        """Bid again after ``stand_down``. Returns False when not standing down."""
+        if not self.standing_down:
+            return False
+        self.standing_down = False
+        self.last_change_s = now_s
+        return True
+
     def set_position(self, position) -> None:
         """Move the start of the path (the robot's current position) for future bids."""
         self.robot.position = np.asarray(position, dtype=float)
@@ -398,7 +423,7 @@ class CBBAAgent:
         """CBBA's bundle phase: add the best outbidding task until none is left or the bundle is full.
 
         Returns True when the bundle changed."""
-        if not self.alive or not self.n_tasks:
+        if not self.alive or self.standing_down or not self.n_tasks:
             return False
         limit = self.auction.bundle_limit or math.inf
         if self._geometry is None:
@@ -424,7 +449,7 @@ class CBBAAgent:
 
     def would_bid(self) -> bool:
         """True when a bundle phase now would add a task (a dry run for convergence checks)."""
-        if not self.alive or not self.n_tasks:
+        if not self.alive or self.standing_down or not self.n_tasks:
             return False
         if self.auction.bundle_limit and len(self.bundle) >= self.auction.bundle_limit:
             return False

@@ -12,6 +12,8 @@
     lost_after_s = 3.0     # a robot without a DVL is lost after this long without a visual fix ...
     lost_sigma_m = 0.15    # ... or when more unsure of its position than this
     lost_give_up = 0       # a robot lost this many times on its way to one view gives it up (0: never)
+    lost_stand_down = true # a robot still lost after flying home and sweeping there releases its tasks
+                           # and holds where it is until it has a fix (false: it keeps them)
     render_samples = 4     # the images' anti-aliasing samples (0: off, about twice as fast on a CPU)
     perception_process = true  # perception and discovery in a worker process (false: inline, slower)
     water_backend = "prefer-gl"  # where the water model runs: prefer-gl, gl, cpu or auto (Simulation's)
@@ -76,6 +78,7 @@ MISSION_KEYS = {
     "lost_after_s",
     "lost_sigma_m",
     "lost_give_up",
+    "lost_stand_down",
     "render_samples",
     "perception_process",
     "water_backend",
@@ -100,6 +103,7 @@ SETTING_TYPES: dict[str, type] = {
     "relocalise": bool,
     "explore": bool,
     "retire_taken": bool,
+    "lost_stand_down": bool,
     "inspect_region": str,
     "inspect_box": list,
     "dense_depth": bool,

@@ -8,7 +8,9 @@ the motion model), its horizontal position corrected by its front end (``vo``: v
 relocalisation against its own map, weighed against the dead reckoning). A robot without a DVL that has
 had no visual fix for ``lost_after_s``, or is unsure of its position past ``lost_sigma_m``, goes back, on
 its dead reckoning, to where it explored from, turns to the heading it explored along, the view its map
-knows best, and sweeps it, rather than chase a goal it cannot tell it has reached. Every
+knows best, and sweeps it, rather than chase a goal it cannot tell it has reached; still lost after
+that, it stands down (``lost_stand_down``): it releases its tasks and holds where it is until it has a
+fix again. Every
 ``1 / frame_rate_hz`` seconds each robot renders its stereo pair and its front end
 (:mod:`maptidal.perception.frontend`) tracks, fuses and, at a keyframe, meshes; discovery
 (:func:`maptidal.discovery.discover`) runs on the mesh with every task the robot knows as existing tasks,
@@ -26,7 +28,8 @@ only verified views are scored. A view it cannot pitch to is declined, with the 
 
 A robot that times out on a task gives it up (:meth:`maptidal.allocation.agent.CBBAAgent.give_up`): it
 leaves its bundle, so a teammate can win it. The mission ends when every robot has explored and every
-task is done or given up by every live robot, or at ``duration_s``.
+task is done or given up by every live robot (a robot standing down is not waited for), or at
+``duration_s``.
 Scripted events: a robot failing (it stops and falls silent; CBBA releases its tasks after the agents'
 failure timeout) and a current. Outputs go to the output folder as the mission runs
 (:mod:`maptidal.mission.outputs`).
@@ -69,6 +72,7 @@ from maptidal.mission.capture import camera_pose_from_body
 from maptidal.mission.clearance import waiting_point
 from maptidal.mission.outputs import MissionWriter
 from maptidal.mission.perception import ExploreRequest, FrameJob, FrameResult, start_perception
+from maptidal.mission.routes import survey_route, sweep_legs
 from maptidal.mission.sharing import sharing_table, tasks_lost
 from maptidal.mission.verification import check_view, pitch_to_fly, view_pitch
 from maptidal.mission.video import MissionVideo
@@ -162,6 +166,15 @@ class MissionParams:
     # timeouts from 163 s a mission to 18 s, but on variant A the robots met more, three missions of ten
     # with minutes of contact (README, "Without a DVL")
     lost_give_up: int = 0
+    # a robot still lost when its recovery (home, and the sweep there) is over stands down: it has tried
+    # the view its map knows best and found no fix there, so its estimate is off by more than
+    # relocalisation reaches, and it cannot tell when it reaches any view or look. It releases its
+    # tasks to its teammates, bids on none, and holds where it is, sweeping its camera there, rather
+    # than fly on an estimate that far off through the water its teammates work in; with a fix again it
+    # bids again (a "stood_down" event, then "resumed"). False: it keeps its tasks and tries each until
+    # the task timeout, flying home and back. In session 32's missions a robot lost for good held its
+    # tasks, and timed out on one after another, for up to 200 s (README, "Without a DVL")
+    lost_stand_down: bool = True
     # keeping clear of teammates, on where their last message said they were: two Heavy hulls (0.457 x
     # 0.575 m, Blue Robotics' technical details) touch below 0.73 m centre to centre at worst; 1 m leaves
     # the rest for the estimates' error. A robot gives way to every teammate heard from in the last
@@ -326,6 +339,12 @@ class MissionParams:
             raise ValueError(f"stall_s must be finite and >= 0, stall_move_m finite; got {self.stall_s!r}")
         if not (math.isfinite(self.clearance_m) and self.clearance_m >= 0):
             raise ValueError(f"clearance_m must be finite and >= 0, got {self.clearance_m!r}")
+        if not (0 < self.explore_yaw_deg < 90 and 0 < self.yaw_rate_deg_s < math.inf):
+            # a sweep crosses twice explore_yaw_deg in one turn, which must go the short way
+            raise ValueError(
+                f"explore_yaw_deg must be in (0, 90) and yaw_rate_deg_s positive; got "
+                f"{self.explore_yaw_deg!r}, {self.yaw_rate_deg_s!r}"
+            )
         if self.inspect_region not in INSPECT_REGIONS:
             raise ValueError(
                 f"inspect_region must be one of {', '.join(INSPECT_REGIONS)}, got {self.inspect_region!r}"
@@ -479,6 +498,7 @@ class _Robot:
     home_yaw: float = 0.0  # the heading it explored along (its map lies that way)
     recovery: Route | None = None  # its way back home when lost, flown from lost_since_s
     lost_since_s: float = 0.0
+    lost_at_s: float = 0.0  # when it was last found lost
     yielding: bool = False  # holding its reference out of a teammate's clearance
     referenced_s: float | None = (
         None  # when its reference was last worked out (its route pauses while yielding)
@@ -677,11 +697,16 @@ class Mission:
                 for name in fronts
             }
             # it explores the box and the water its views stand in: the standoff and the clearance
-            # they keep from the walls around it
+            # they keep from the walls around it; a look is worth what it reveals of the box, grown as
+            # rule 1 grows it, where the structure lies
             if box is not None:
                 reach = params.discovery.standoff + map_params.clearance_m
                 grown = _corners([box[0] - reach, box[1] + reach])
-                self.explore_params = dataclasses.replace(params.frontier, explore_box=grown)
+                tolerance = map_params.plane_tolerance_m
+                counted = _corners([box[0] - tolerance, box[1] + tolerance])
+                self.explore_params = dataclasses.replace(
+                    params.frontier, explore_box=grown, gain_box=counted
+                )
         self.perception.configure(fronts, params.discovery, maps)
         # the robots' cameras render on a thread of their own, beside the physics (MuJoCo lets go of
         # Python's lock while it draws): the renderer, and its GL context, are made there, and every draw
@@ -713,14 +738,8 @@ class Mission:
         )
 
     def _sweep(self, position: np.ndarray, yaw: float) -> list[PoseTrajectory]:
-        """The exploration's yaw sweep at ``position``: from ``yaw`` to ``explore_yaw_deg`` either side
-        and back, holding the place."""
-        sweep, limits = math.radians(self.params.explore_yaw_deg), self._limits()
-        return [
-            PoseTrajectory(position, yaw, position, yaw + sweep, limits),
-            PoseTrajectory(position, yaw + sweep, position, yaw - sweep, limits),
-            PoseTrajectory(position, yaw - sweep, position, yaw, limits),
-        ]
+        """The exploration's yaw sweep at ``position``, facing ``yaw`` (``sweep_legs``)."""
+        return sweep_legs(position, yaw, math.radians(self.params.explore_yaw_deg), self._limits())
 
     def _start_exploring(self, robot: _Robot, now: float) -> None:
         estimate = self._estimate(robot)
@@ -748,19 +767,41 @@ class Mission:
             # cannot tell it has reached (that flies it away at full speed); go where a fix is likely, on
             # the dead reckoning, which holds for the few seconds this takes (``_lost``)
             if now - robot.lost_since_s > robot.recovery.duration:
-                self._start_recovery(robot, now)  # home, swept, and still lost: sweep again
+                self._stand_down(robot, now)  # home, swept, and still lost: it stands down
+                self._start_recovery(robot, now)  # ... and sweeps again
             reference = robot.recovery.at(now - robot.lost_since_s)
         return self._keep_clear(robot, reference, now)
+
+    def _stand_down(self, robot: _Robot, now: float) -> None:
+        """``robot``, still lost after its recovery, stands down (``lost_stand_down``): its agent releases
+        its tasks and bids on none, and it leaves the task or the look it was flying to, which it may
+        survey again once it has a fix."""
+        if not self.params.lost_stand_down or not self.auction.agents[robot.index].stand_down(now):
+            return
+        left = robot.activity
+        if left == "survey":
+            robot.surveyed.pop()
+            robot.survey_ended_s, robot.frontier = now, None
+        if left in ("fly", "survey"):
+            robot.activity = "idle"
+        lost_s = round(now - robot.lost_at_s, 2)
+        self.writer.event(now, "stood_down", robot=robot.name, left=left, lost_s=lost_s)
 
     def _start_recovery(self, robot: _Robot, now: float) -> None:
         """A lost robot's way back (``_lost``): on its dead reckoning to where it explored from, turning
         to the heading it explored along, the view its map knows best; then the exploration's yaw sweep
-        there, in case that view is bare (its estimate may be off, and the robot facing a blank wall)."""
+        there, in case that view is bare (its estimate may be off, and the robot facing a blank wall).
+        A robot standing down (``_stand_down``) went home once and found no fix there: its estimate is
+        off by more than that way could mend, and flying on it would take it where it does not know,
+        through the water its teammates work in. It holds where it is and sweeps there."""
         estimate = self._estimate(robot)
+        robot.lost_since_s = now
+        if self.auction.agents[robot.index].standing_down:
+            robot.recovery = Route(self._sweep(estimate.position.copy(), estimate.yaw))
+            return
         home, yaw = robot.home_position, robot.home_yaw
         way_home = PoseTrajectory(estimate.position.copy(), estimate.yaw, home, yaw, self._limits())
         robot.recovery = Route([way_home, *self._sweep(home, yaw)])
-        robot.lost_since_s = now
 
     def _teammates_heard(self, robot: _Robot, now: float) -> np.ndarray:
         """Rows ``(x, y, z, age_s)``: where each teammate's last message put it, and how long ago."""
@@ -862,6 +903,7 @@ class Mission:
             robot.lost = lost
             if lost:
                 robot.lost_why = "no_fix" if unfixed else "uncertain"
+                robot.lost_at_s = now
                 robot.task_losses += robot.activity == "fly"
                 robot.controller.reset_horizontal()
                 # go back to where it explored from, the view its map knows best (its anchors there were
@@ -880,6 +922,8 @@ class Mission:
                 )
             else:
                 self.writer.event(now, "position_regained", robot=robot.name)
+                if self.auction.agents[robot.index].resume(now):
+                    self.writer.event(now, "resumed", robot=robot.name)
         return lost
 
     def _estimate(self, robot: _Robot):
@@ -1220,6 +1264,8 @@ class Mission:
                 self.writer.event(now, "surveyed", robot=robot.name, timed_out=timed_out)
             return
         if robot.activity == "idle":
+            if agent.standing_down:
+                return  # lost: it recovers, and flies to no task or look (``_stand_down``)
             key = next((k for k in agent.path_keys() if k not in robot.skipped and agent.is_open(k)), None)
             if key is None:
                 self._explore(robot, now)
@@ -1333,8 +1379,8 @@ class Mission:
         x, y, z, yaw, gain, _ = robot.frontier[0]
         look = np.array([x, y, z])  # where the vehicle's centre stands for the look
         estimate = self._estimate(robot)
-        way_there = PoseTrajectory(estimate.position.copy(), estimate.yaw, look, yaw, self._limits())
-        robot.route = Route([way_there, *self._sweep(look, yaw)])
+        sweep = math.radians(self.params.explore_yaw_deg)
+        robot.route = survey_route(estimate.position.copy(), estimate.yaw, look, yaw, sweep, self._limits())
         robot.goal, robot.view = None, None
         robot.route_start_s, robot.task_started_s = now, now
         robot.surveyed.append(look)
@@ -1397,11 +1443,16 @@ class Mission:
     def _finished(self) -> bool:
         if any(r.activity == "waiting" for r in self.robots.values()):
             return False
-        alive = [r for r in self.robots.values() if r.active]
-        if not alive or not all(r.explored for r in alive):
+        # a robot standing down (lost) can do nothing of what is left; the others are judged
+        able = [r for r in self.robots.values() if r.active and not self._standing_down(r)]
+        if not able or not all(r.explored for r in able):
             return False
-        open_tasks, known = self._open_tasks(alive)
+        open_tasks, known = self._open_tasks(able)
         return known > 0 and open_tasks == 0
+
+    def _standing_down(self, robot: _Robot) -> bool:
+        """Whether ``robot`` stands down, lost (``_stand_down``)."""
+        return self.auction.agents[robot.index].standing_down
 
     def _open_tasks(self, alive: list[_Robot]) -> tuple[int, int]:
         """How many of the tasks the live robots know are neither done nor given up, and how many they
@@ -1416,9 +1467,13 @@ class Mission:
         """How the mission ended, in one sentence: when it finished its work, or what was left at the
         ``duration_s`` cap (tasks neither done nor given up, robots still exploring or waiting, none
         alive)."""
-        if finished:
-            return f"finished at {now:.1f} s: every robot explored and every known task was done or given up"
         alive = [r for r in self.robots.values() if r.active]
+        lost = [r.name for r in alive if self._standing_down(r)]
+        if finished:
+            return (
+                f"finished at {now:.1f} s: every robot explored and every known task was done or given up"
+                + (f" ({', '.join(lost)} lost, standing down)" if lost else "")
+            )
         if not alive:
             return f"stopped at {now:.1f} s: no robot was alive"
         open_tasks, known = self._open_tasks(alive)
@@ -1429,6 +1484,8 @@ class Mission:
         waiting = [r.name for r in self.robots.values() if r.activity == "waiting"]
         if waiting:
             reasons.append(f"{', '.join(waiting)} not yet launched")
+        if lost:
+            reasons.append(f"{', '.join(lost)} lost, standing down")
         return f"not finished at the {now:.1f} s cap: " + "; ".join(reasons)
 
     def inspected_pct(self) -> float:

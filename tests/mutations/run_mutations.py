@@ -1,8 +1,9 @@
 """Re-run the mutation lists of tests/README.md (M: physics, F: flight modes and estimator, V: done means
 seen, L: localisation, S: sharing discoveries, T: the closed tank, I: interrupts, B: the batched
 environment, N: the compiled flight stack, W: keeping clear of a teammate's way, X: the box to inspect and
-retiring covered tasks): apply each mutation to the source, run its group's tests,
-record which test fails first, and restore the file. Every mutation must be killed.
+retiring covered tasks, Y: what exploring counts and the survey's route, Z: a lost robot standing down):
+apply each mutation to the source, run its group's tests, record which test fails first, and restore the
+file. Every mutation must be killed.
 
     python tests/mutations/run_mutations.py            # all
     python tests/mutations/run_mutations.py M3 F7      # some
@@ -54,6 +55,19 @@ REGION_TESTS = [
     "tests/test_mission.py::test_a_robot_retires_the_task_its_review_found_covered_when_it_comes_to_it",
     "tests/test_loop_discovery.py::test_perception_reviews_the_path_against_the_views_taken_on_its_map",
 ]
+EXPLORE_TESTS = [
+    "tests/test_exploration.py",
+    "tests/test_routes.py",
+    "tests/test_mission.py::test_the_box_a_team_is_sent_to_inspect",
+    "tests/test_loop_discovery.py::test_each_keyframes_dense_depth_maps_the_walls_where_they_are",
+    "tests/test_loop_discovery.py::test_an_idle_robot_surveys_its_best_look_waits_for_a_teammate_and_then_has_explored",
+]
+STAND_DOWN_TESTS = [
+    "tests/test_allocation.py::test_a_robot_standing_down_leaves_its_tasks_to_the_team_until_it_resumes",
+    "tests/test_localisation_loop.py::test_a_robot_still_lost_after_its_recovery_stands_down_until_it_has_a_fix",
+    "tests/test_localisation_loop.py::test_a_robot_lost_for_good_is_not_waited_for_and_the_ending_says_so",
+    "tests/test_localisation_loop.py::test_without_standing_down_a_lost_robot_keeps_its_task",
+]
 TESTS_OF_GROUP = {
     "M": TESTS,
     "F": FLIGHT_TESTS,
@@ -68,6 +82,8 @@ TESTS_OF_GROUP = {
     "P": PLANNER_TESTS,
     "W": KEEP_CLEAR_TESTS,
     "X": REGION_TESTS,
+    "Y": EXPLORE_TESTS,
+    "Z": STAND_DOWN_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -1372,6 +1388,141 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "maptidal/mission/run.py",
                 "    return np.asarray(tank.evaluated_surface().bounds, float)",
                 "    return np.asarray(tank.evaluated_surface().bounds, float) * [[1, 1, 1], [1, 1, 0.5]]",
+            )
+        ],
+    ),
+    "Y1": (
+        "a look's gain counts unknown voxels outside the gain box too",
+        [
+            (
+                "maptidal/exploration.py",
+                "        seen_unknown &= grid.counted().ravel()[flat]\n",
+                "        pass\n",
+            )
+        ],
+    ),
+    "Y2": (
+        "the frontier borders unknown voxels outside the gain box too",
+        [
+            (
+                "maptidal/exploration.py",
+                "    padded = np.where(grid.counted(pad=1), np.pad(",
+                "    padded = np.where(True, np.pad(",
+            )
+        ],
+    ),
+    "Y3": (
+        "the gain box's cells placed without the padding",
+        [
+            (
+                "maptidal/exploration.py",
+                "(np.arange(n) - pad + self.origin[d] + 0.5)",
+                "(np.arange(n) + self.origin[d] + 0.5)",
+            )
+        ],
+    ),
+    "Y4": (
+        "the mission counts unknown water everywhere",
+        [
+            (
+                "maptidal/mission/run.py",
+                "params.frontier, explore_box=grown, gain_box=counted",
+                "params.frontier, explore_box=grown",
+            )
+        ],
+    ),
+    "Y5": (
+        "a survey flies to the look facing the way it came",
+        [
+            (
+                "maptidal/mission/routes.py",
+                "[PoseTrajectory(start, start_yaw, look, yaw, limits), *sweep_legs(",
+                "[PoseTrajectory(start, start_yaw, look, start_yaw, limits), *sweep_legs(",
+            )
+        ],
+    ),
+    "Y6": (
+        "a sweep does not turn back",
+        [
+            (
+                "maptidal/mission/routes.py",
+                "        PoseTrajectory(position, yaw - sweep_rad, position, yaw, limits),\n",
+                "",
+            )
+        ],
+    ),
+    "Y7": (
+        "a sweep turns to one side only",
+        [
+            (
+                "maptidal/mission/routes.py",
+                "        PoseTrajectory(position, yaw + sweep_rad, position, yaw - sweep_rad, limits),\n",
+                "        PoseTrajectory(position, yaw + sweep_rad, position, yaw, limits),\n",
+            )
+        ],
+    ),
+    "Z1": (
+        "a robot standing down keeps its bundle",
+        [("maptidal/allocation/agent.py", "        self._drop_from_bundle(set(self.bundle))\n", "")],
+    ),
+    "Z2": (
+        "a robot standing down bids all the same",
+        [
+            (
+                "maptidal/allocation/agent.py",
+                "        if not self.alive or self.standing_down or not self.n_tasks:\n"
+                "            return False\n        limit",
+                "        if not self.alive or not self.n_tasks:\n            return False\n        limit",
+            )
+        ],
+    ),
+    "Z3": (
+        "a robot still lost after its recovery does not stand down",
+        [
+            (
+                "maptidal/mission/run.py",
+                "                self._stand_down(robot, now)  # home,",
+                "                pass  # home,",
+            )
+        ],
+    ),
+    "Z4": (
+        "a robot standing down takes its next task or look",
+        [
+            (
+                "maptidal/mission/run.py",
+                "            if agent.standing_down:\n                return",
+                "            if False:\n                return",
+            )
+        ],
+    ),
+    "Z5": (
+        "the mission waits on a robot standing down",
+        [
+            (
+                "maptidal/mission/run.py",
+                "if r.active and not self._standing_down(r)]",
+                "if r.active]",
+            )
+        ],
+    ),
+    "Z7": (
+        "a robot standing down flies home again",
+        [
+            (
+                "maptidal/mission/run.py",
+                "        if self.auction.agents[robot.index].standing_down:\n            robot.recovery",
+                "        if False:\n            robot.recovery",
+            )
+        ],
+    ),
+    "Z6": (
+        "a robot found again does not bid again",
+        [
+            (
+                "maptidal/mission/run.py",
+                "                if self.auction.agents[robot.index].resume(now):",
+                "                if False:",
             )
         ],
     ),
