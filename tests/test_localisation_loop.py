@@ -14,7 +14,7 @@ from mission_helpers import mission_at_rest
 from maptidal.controllers.estimation import MotionModel
 from maptidal.controllers.trajectory import PoseTrajectory, Route
 from maptidal.mission.config import load_mission
-from maptidal.mission.outputs import read_events
+from maptidal.mission.outputs import read_events, standing_down_spans
 from maptidal.mission.run import Mission, MissionParams
 
 
@@ -190,6 +190,23 @@ def test_a_robot_still_lost_after_its_recovery_stands_down_until_it_has_a_fix(tm
     assert len(stood) == 1 and stood[0]["left"] == "fly"
     assert stood[0]["lost_s"] == pytest.approx(done_at - lost_at, abs=0.01)
     assert [e["kind"] for e in events].count("resumed") == 1
+    # the timeline shades it from the stand-down to the resumption
+    resumed = next(e["t"] for e in events if e["kind"] == "resumed")
+    spans = standing_down_spans(read_events(tmp_path), "rov1", 100.0)
+    assert spans == [pytest.approx((stood[0]["t"], resumed - stood[0]["t"]))]
+
+
+def test_the_spans_a_robot_stood_down_run_to_its_resumption_or_the_end():
+    events = [
+        {"t": 5.0, "kind": "stood_down", "robot": "rov1"},
+        {"t": 6.0, "kind": "stood_down", "robot": "rov0"},
+        {"t": 9.0, "kind": "resumed", "robot": "rov1"},
+        {"t": 20.0, "kind": "stood_down", "robot": "rov1"},
+        {"t": 25.0, "kind": "position_lost", "robot": "rov1"},
+    ]
+    assert standing_down_spans(events, "rov1", 30.0) == [(5.0, 4.0), (20.0, 10.0)]
+    assert standing_down_spans(events, "rov0", 30.0) == [(6.0, 24.0)]
+    assert standing_down_spans(events, "rov2", 30.0) == []
 
 
 def test_a_robot_lost_for_good_is_not_waited_for_and_the_ending_says_so(tmp_path):

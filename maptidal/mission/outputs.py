@@ -193,6 +193,23 @@ def read_events(root) -> list[dict]:
     return events
 
 
+def standing_down_spans(events: list[dict], robot: str, end_s: float) -> list[tuple[float, float]]:
+    """When ``robot`` stood down, lost (``stood_down`` events, each to the next ``resumed`` or to
+    ``end_s``): ``(start, duration)`` pairs, in order."""
+    spans, since = [], None
+    for event in events:
+        if event.get("robot") != robot:
+            continue
+        if event["kind"] == "stood_down" and since is None:
+            since = float(event["t"])
+        elif event["kind"] == "resumed" and since is not None:
+            spans.append((since, float(event["t"]) - since))
+            since = None
+    if since is not None:
+        spans.append((since, max(end_s - since, 0.0)))
+    return spans
+
+
 def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: tuple | None) -> None:
     """The top view, the coverage histogram and the views-per-voxel map (from ``occluded``, the evaluation
     :func:`coverage_of` made) and the timeline."""
@@ -265,12 +282,18 @@ def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: t
                 color=colour_of[name],
                 label=f"{label}" if k == 0 else None,
             )
+    end_s, label = float(document.get("sim_time_s", 0.0)), "standing down (lost)"
+    for k, name in enumerate(robots):
+        spans = standing_down_spans(events, name, end_s)
+        if spans:
+            axis.broken_barh(spans, (k - 0.3, 0.6), color="0.8", zorder=0, label=label)
+            label = None  # once in the legend
     for event in events:
         if event["kind"] == "fail":
             axis.axvline(event["t"], color="red", lw=1)
     axis.set_yticks(range(len(robots)), robots)
     axis.set_xlabel("simulated time (s)")
-    axis.set_title("Tasks found, allocated and done per robot (red line: a failure)")
+    axis.set_title("Tasks found, allocated and done per robot (red line: a failure; grey: standing down)")
     axis.legend(fontsize=7)
     figure.tight_layout()
     save_png(figure, root / "timeline.png")
