@@ -174,16 +174,27 @@ class VoxelStates:
         """The world centres of grid cells ``index`` ``(N, 3)``."""
         return (np.asarray(index) + self.origin + 0.5) * self.size
 
+    def axes(self, pad: int = 0) -> list[np.ndarray]:
+        """The world centres of the cells along each axis of the grid padded by ``pad`` cells each way."""
+        return [
+            (np.arange(n + 2 * pad) - pad + self.origin[d] + 0.5) * self.size
+            for d, n in enumerate(self.states.shape)
+        ]
+
     def counted(self, pad: int = 0) -> np.ndarray:
         """Which cells of the grid, padded by ``pad`` cells each way, have their centre in ``gain_box``
         (all, without one): a boolean array of the padded grid's shape."""
-        shape = tuple(n + 2 * pad for n in self.states.shape)
         if self.gain_box is None:
-            return np.ones(shape, bool)
-        low, high = (np.asarray(corner, float) for corner in self.gain_box)
-        axes = [(np.arange(n) - pad + self.origin[d] + 0.5) * self.size for d, n in enumerate(shape)]
-        x, y, z = ((axis >= low[d]) & (axis <= high[d]) for d, axis in enumerate(axes))
-        return x[:, None, None] & y[None, :, None] & z[None, None, :]
+            return np.ones(tuple(n + 2 * pad for n in self.states.shape), bool)
+        return _in_box(self.axes(pad), self.gain_box)
+
+
+def _in_box(axes: list[np.ndarray], box) -> np.ndarray:
+    """Which cells of the grid whose cell centres lie at ``axes`` along each axis are in ``box`` (lowest
+    and highest corners): the test is separable by axis."""
+    low, high = (np.asarray(corner, float) for corner in box)
+    x, y, z = ((axis >= low[d]) & (axis <= high[d]) for d, axis in enumerate(axes))
+    return x[:, None, None] & y[None, :, None] & z[None, None, :]
 
 
 def voxel_states(
@@ -212,7 +223,7 @@ def voxel_states(
         states[tuple(cells[keep].T)] = OCCUPIED
     grid = VoxelStates(states, low, size, params.gain_box)
     # the grid's axes in the world: the tests below are separable by axis
-    axes = [(np.arange(n) + low[d] + 0.5) * size for d, n in enumerate(shape)]
+    axes = grid.axes()
     outside = np.zeros(shape, bool)
     surface = robot_map.params.surface_z
     if surface is not None:
@@ -221,9 +232,7 @@ def voxel_states(
         x, y, z = ((axis - centre) ** 2 for axis, centre in zip(axes, np.asarray(launch, float), strict=True))
         outside |= x[:, None, None] + y[None, :, None] + z[None, None, :] > params.explore_radius_m**2
     if params.explore_box is not None:
-        low, high = (np.asarray(corner, float) for corner in params.explore_box)
-        x, y, z = ((axis < low[d]) | (axis > high[d]) for d, axis in enumerate(axes))
-        outside |= x[:, None, None] | y[None, :, None] | z[None, None, :]
+        outside |= ~_in_box(axes, params.explore_box)
     states[outside & (states != OCCUPIED)] = OUTSIDE
     return grid
 

@@ -796,7 +796,7 @@ class Mission:
         through the water its teammates work in. It holds where it is and sweeps there."""
         estimate = self._estimate(robot)
         robot.lost_since_s = now
-        if self.auction.agents[robot.index].standing_down:
+        if self._standing_down(robot):
             robot.recovery = Route(self._sweep(estimate.position.copy(), estimate.yaw))
             return
         home, yaw = robot.home_position, robot.home_yaw

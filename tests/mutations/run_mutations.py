@@ -1343,8 +1343,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/exploration.py",
-                "        outside |= x[:, None, None] | y[None, :, None] | z[None, None, :]\n",
-                "",
+                "        outside |= ~_in_box(axes, params.explore_box)\n",
+                "        pass\n",
             )
         ],
     ),
@@ -1416,8 +1416,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/exploration.py",
-                "(np.arange(n) - pad + self.origin[d] + 0.5)",
-                "(np.arange(n) + self.origin[d] + 0.5)",
+                "(np.arange(n + 2 * pad) - pad + self.origin[d] + 0.5)",
+                "(np.arange(n + 2 * pad) + self.origin[d] + 0.5)",
             )
         ],
     ),
@@ -1511,7 +1511,7 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/mission/run.py",
-                "        if self.auction.agents[robot.index].standing_down:\n            robot.recovery",
+                "        if self._standing_down(robot):\n            robot.recovery",
                 "        if False:\n            robot.recovery",
             )
         ],
