@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from maptidal.map_discovery import MapAwareParams, RobotMap, near_teammates
-from maptidal.perception.dense import DenseDepthParams, dense_points, disparity_map
+from maptidal.perception.dense import (
+    DenseDepthParams,
+    dense_points,
+    disparity_map,
+    gray_noise_sigma,
+    texture_threshold,
+    textured_pixels,
+)
 from maptidal.perception.recording import CameraIntrinsics
 
 
@@ -102,6 +109,81 @@ def test_a_bare_pair_and_far_points_give_nothing_and_a_lost_pose_gives_nothing()
     assert len(dense_points(near_left, near_right, k, np.full(3, np.nan), np.eye(3))) == 0
 
 
+def test_the_grey_images_noise_is_the_models():
+    """Against a Monte-Carlo draw: an RGB patch of a fixed colour with independent Gaussian noise in each
+    channel, rounded to 8 bits and turned grey by OpenCV, as the simulator's camera images are."""
+    import cv2
+
+    rng = np.random.default_rng(6)
+    for sigma in (0.8, 2.0, 5.0):
+        colour = np.array([70.3, 121.6, 95.45])
+        rgb = colour + rng.normal(0.0, sigma, (400, 400, 3))
+        gray = cv2.cvtColor(np.clip(np.round(rgb), 0, 255).astype(np.uint8), cv2.COLOR_RGB2GRAY)
+        assert gray.std() == pytest.approx(gray_noise_sigma(sigma), rel=0.03)
+        single = np.clip(np.round(100.2 + rng.normal(0.0, sigma, (400, 400))), 0, 255).astype(np.uint8)
+        assert single.std() == pytest.approx(gray_noise_sigma(sigma, channels=1), rel=0.03)
+
+
+def test_the_texture_test_is_each_blocks_sample_std_against_the_threshold():
+    """Against the literal construction: each pixel's block, reflected at the border, and numpy's sample
+    standard deviation of it."""
+    rng = np.random.default_rng(7)
+    image = np.clip(np.round(100 + rng.normal(0, 2.0, (23, 31)) + np.arange(31) * 0.15), 0, 255)
+    image = image.astype(np.uint8)
+    for block in (3, 5, 7):
+        half = block // 2
+        padded = np.pad(image.astype(float), half, mode="reflect")
+        stds = np.array(
+            [
+                [padded[v : v + block, u : u + block].std(ddof=1) for u in range(image.shape[1])]
+                for v in range(image.shape[0])
+            ]
+        )
+        threshold = float(np.median(stds))
+        mask = textured_pixels(image, block, threshold)
+        clear = np.abs(stds - threshold) > 1e-6  # a tie is no test of the arithmetic
+        assert np.array_equal(mask[clear], (stds > threshold)[clear])
+        assert 0.3 < mask.mean() < 0.7
+
+
+def test_noise_alone_passes_the_texture_test_at_one_minus_the_confidence():
+    """A flat patch under noise of the given std: the share of its blocks that pass is the false-alarm
+    rate the chi-square bound promises (drawn here, not computed)."""
+    rng = np.random.default_rng(8)
+    sigma = 1.5
+    flat = 110.5 + rng.normal(0.0, sigma, (400, 400))
+    for confidence in (0.9, 0.99):
+        passed = textured_pixels(flat, 5, texture_threshold(sigma, 5, confidence))
+        assert passed.mean() == pytest.approx(1.0 - confidence, rel=0.15)
+    assert texture_threshold(sigma, 5, 0.0) == 0.0
+
+
+def test_a_bare_patch_under_noise_gets_no_depth_and_the_texture_keeps_its_own():
+    """The upper half of the pair is a flat grey under independent noise in each image (as the water
+    surface seen from below), the lower half a textured plane at 12 px. Without the texture test the
+    matcher fits the noise in the upper half; with it the upper half gives (nearly) nothing, and the plane
+    keeps every point."""
+    rng = np.random.default_rng(9)
+    left, right = (image.astype(float) for image in shifted_pair(rng, lambda x: 12))
+    left[:100], right[:100] = 90.3, 90.3
+    noisy = [
+        np.clip(np.round(i + rng.normal(0, 2.0, i.shape)), 0, 255).astype(np.uint8) for i in (left, right)
+    ]
+    k = mission_camera()
+    counts = {}
+    for confidence in (0.0, 0.99):
+        params = DenseDepthParams(pixel_noise_sigma=2.0, texture_confidence=confidence)
+        points = dense_points(*noisy, k, np.zeros(3), np.eye(3), params)
+        v = points[:, 1] / points[:, 2] * k.fy + k.cy
+        plane = points[v > 104, 2]
+        assert np.median(np.abs(plane - k.fx * k.baseline_m / 12)) < 0.01
+        counts[confidence] = ((v < 96).sum(), len(plane))
+    cells_above = 12 * 40  # rows of cells wholly in the upper half, times columns
+    assert counts[0.0][0] > 0.1 * cells_above  # the matcher does fit the noise
+    assert counts[0.99][0] <= 0.02 * cells_above
+    assert counts[0.99][1] >= 0.98 * counts[0.0][1]
+
+
 def test_bad_input_is_refused():
     with pytest.raises(ValueError, match="num_disparities"):
         DenseDepthParams(num_disparities=20)
@@ -109,6 +191,10 @@ def test_bad_input_is_refused():
         DenseDepthParams(block_size=4)
     with pytest.raises(ValueError, match="max_depth_m"):
         DenseDepthParams(max_depth_m=math.nan)
+    with pytest.raises(ValueError, match="pixel_noise_sigma"):
+        DenseDepthParams(pixel_noise_sigma=-1.0)
+    with pytest.raises(ValueError, match="texture_confidence"):
+        DenseDepthParams(texture_confidence=1.0)
     with pytest.raises(ValueError, match="sizes differ"):
         disparity_map(np.zeros((200, 320), np.uint8), np.zeros((200, 300), np.uint8), DenseDepthParams())
 
@@ -133,6 +219,37 @@ def test_the_simulators_bare_wall_is_at_the_rendered_depth():
     error = np.abs(points[:, 2] - depth[v, u])
     assert np.median(error) < 0.02 and np.percentile(error, 90) < 0.05
     sim.close()
+
+
+def test_the_simulators_water_surface_seen_from_below_gives_no_depth():
+    """A robot half a metre under the surface, looking at the side wall: above the wall's top edge the
+    camera sees the surface from below, where the renderer's depth is its far clip. The matcher fits the
+    noise there (the texture test off); with the test set from the scenario's camera noise, next to none
+    of those points remain, and the wall keeps nearly all its accurate ones."""
+    from maptidal.camera import StereoCameraParams
+    from maptidal.envs.simulation import Simulation
+
+    sim = Simulation("assets/scenarios/mission.toml", camera=StereoCameraParams(width=320, height=200))
+    sim.reset(seed=0)
+    sim.place("rov1", [-5.0, 0.0, 0.4])  # out of view
+    sim.place("rov0", [-1.0, 0.0, 1.5], yaw_rad=math.radians(90.0))
+    left, right, depth, _ = sim.render_stereo("rov0", depth=True)
+    noise = sim.scenario.water.noise_sigma
+    assert noise > 0
+    matrix = sim.intrinsics()["K"]
+    k = mission_camera(fx=matrix[0][0], fy=matrix[1][1], cx=matrix[0][2], cy=matrix[1][2])
+    sim.close()
+    found = {}
+    for confidence in (0.0, 0.99):
+        params = DenseDepthParams(pixel_noise_sigma=noise, texture_confidence=confidence)
+        points = dense_points(left, right, k, np.zeros(3), np.eye(3), params)
+        u = np.round(points[:, 0] / points[:, 2] * k.fx + k.cx).astype(int)
+        v = np.round(points[:, 1] / points[:, 2] * k.fy + k.cy).astype(int)
+        truth = depth[v, u]
+        found[confidence] = ((truth > 40.0).sum(), (np.abs(points[:, 2] - truth) < 0.05).sum())
+    assert found[0.0][0] >= 30  # open water put at 0.5 to 3 m
+    assert found[0.99][0] <= 0.15 * found[0.0][0]
+    assert found[0.99][1] >= 0.9 * found[0.0][1]
 
 
 def test_a_map_folds_in_dense_depth_one_point_a_cell_and_carves_to_it():

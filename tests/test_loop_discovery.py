@@ -274,6 +274,20 @@ def test_each_keyframes_dense_depth_maps_the_walls_where_they_are(tmp_path, dens
     assert np.median(distance) < 0.03 and np.percentile(distance, 80) < 0.1
 
 
+def test_the_robots_dense_depth_knows_the_cameras_noise(tmp_path):
+    """The texture test of each robot's dense depth is set from the scenario's camera noise, as a
+    calibration would give it; with the water model off the images carry no noise."""
+    scenario, _ = load_mission(None)
+    assert scenario.water.noise_sigma > 0
+    with mission_at_rest(tmp_path / "noisy", scenario) as (mission, _):
+        for front in mission.perception.fronts.values():
+            assert front.params.dense.pixel_noise_sigma == scenario.water.noise_sigma
+    clear = dataclasses.replace(scenario, water=dataclasses.replace(scenario.water, enabled=False))
+    with mission_at_rest(tmp_path / "clear", clear) as (mission, _):
+        for front in mission.perception.fronts.values():
+            assert front.params.dense.pixel_noise_sigma == 0.0
+
+
 def test_the_maps_settings_in_a_mission_file_are_checked(tmp_path, capsys):
     from maptidal.mission.config import load_mission
     from maptidal.paths import asset

@@ -135,7 +135,14 @@ def perceive(
                 if robot_map.params.dense_depth:
                     surface = robot_map.add_surface(
                         pose.position,
-                        dense_points(job.left, job.right, front.intrinsics, pose.position, pose.rotation),
+                        dense_points(
+                            job.left,
+                            job.right,
+                            front.intrinsics,
+                            pose.position,
+                            pose.rotation,
+                            front.params.dense,
+                        ),
                         teammates=job.teammates,
                     )
                 found = discover_on_map(

@@ -76,6 +76,7 @@ from maptidal.mission.routes import survey_route, sweep_legs
 from maptidal.mission.sharing import sharing_table, tasks_lost
 from maptidal.mission.verification import check_view, pitch_to_fly, view_pitch
 from maptidal.mission.video import MissionVideo
+from maptidal.perception.dense import DenseDepthParams
 from maptidal.perception.frontend import POSE_SOURCES, FrontEnd, FrontEndParams
 from maptidal.perception.keyframing import KeyframeParams
 from maptidal.perception.odometry import OdometryParams
@@ -629,6 +630,8 @@ class Mission:
         profiles, joining = [], []
         fronts: dict[str, FrontEnd] = {}  # each robot's front end, handed to the perception worker
         launches: dict[str, np.ndarray] = {}  # where each starts (or parks), its estimator's origin
+        water = self.scenario.water
+        camera_noise = water.noise_sigma if water.enabled else 0.0  # per colour channel, 8-bit levels
         for index, spec in enumerate(self.scenario.robots):
             truth = self.sim.ground_truth(spec.name)
             launches[spec.name] = np.asarray(truth["position"], float)
@@ -644,6 +647,8 @@ class Mission:
                     keyframes=params.keyframes,
                     odometry=OdometryParams(has_dvl="dvl" in spec.sensors),
                     relocalisation=RelocalisationParams(enabled=params.relocalise),
+                    # the camera's noise, as a calibration gives it, sets the dense depth's texture test
+                    dense=DenseDepthParams(pixel_noise_sigma=camera_noise),
                 ),
             )
             self.robots[spec.name] = _Robot(

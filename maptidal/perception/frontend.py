@@ -32,6 +32,7 @@ import trimesh
 
 from maptidal.geometry import point_triangle_distances
 from maptidal.keyframes import Keyframe
+from maptidal.perception.dense import DenseDepthParams
 from maptidal.perception.keyframing import KeyframeParams, KeyframeSelector
 from maptidal.perception.landmarks import FusionParams, LandmarkMap, stereo_covariances
 from maptidal.perception.mesher import MesherParams, kimera_mesh
@@ -62,6 +63,8 @@ class FrontEndParams:
     mesher: MesherParams = field(default_factory=MesherParams)
     odometry: OdometryParams = field(default_factory=OdometryParams)
     relocalisation: RelocalisationParams = field(default_factory=RelocalisationParams)
+    # the keyframes' dense stereo depth, for a robot's map (maptidal.perception.dense)
+    dense: DenseDepthParams = field(default_factory=DenseDepthParams)
     max_keyframes: int | None = None
     # start each keypoint's KLT search where the camera's motion since the last frame (the pose source's:
     # attitude and dead reckoning) puts it (maptidal.perception.tracking.track_points). Unaided, the robot

@@ -1226,6 +1226,66 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             )
         ],
     ),
+    "D36": (
+        "dense depth without its texture test",
+        [
+            (
+                "maptidal/perception/dense.py",
+                "matched &= textured_pixels(left_gray, block, threshold)",
+                "matched &= True",
+            )
+        ],
+    ),
+    "D37": (
+        "the grey image's noise without the channels' weights",
+        [
+            (
+                "maptidal/perception/dense.py",
+                "return math.sqrt((pixel_noise_sigma**2 + 1.0 / 12.0) * squares + 1.0 / 12.0)",
+                "return math.sqrt(pixel_noise_sigma**2 + 1.0 / 12.0 + 1.0 / 12.0)",
+            )
+        ],
+    ),
+    "D38": (
+        "the texture bound taken as a variance, not a standard deviation",
+        [
+            (
+                "maptidal/perception/dense.py",
+                "return noise_sigma * math.sqrt(chi2.ppf(confidence, dof) / dof)",
+                "return noise_sigma * chi2.ppf(confidence, dof) / dof",
+            )
+        ],
+    ),
+    "D39": (
+        "the block's spread compared with n, not n - 1, times the bound squared",
+        [
+            (
+                "maptidal/perception/dense.py",
+                "return spread > n * (n - 1) * threshold * threshold",
+                "return spread > n * n * threshold * threshold",
+            )
+        ],
+    ),
+    "D40": (
+        "the robots' dense depth not told the camera's noise",
+        [
+            (
+                "maptidal/mission/run.py",
+                "dense=DenseDepthParams(pixel_noise_sigma=camera_noise),",
+                "dense=DenseDepthParams(),",
+            )
+        ],
+    ),
+    "D41": (
+        "the camera's noise given with the water model off",
+        [
+            (
+                "maptidal/mission/run.py",
+                "camera_noise = water.noise_sigma if water.enabled else 0.0",
+                "camera_noise = water.noise_sigma",
+            )
+        ],
+    ),
     "P1": (
         "a baseline's viewpoints out of the reach band left out, not moved into it",
         [
