@@ -56,6 +56,38 @@ def test_an_unsure_robot_goes_home_and_is_found_again_only_when_sure(tmp_path):
     assert kinds == ["position_lost", "position_regained", "position_lost"]
 
 
+def test_the_time_a_dvl_gives_no_velocity_goes_to_the_front_end_with_the_next_frame(tmp_path):
+    """The DVL robot set down on the floor, its beams shorter than their minimum range: each control
+    period flown there counts, none flown in open water does, and the next frame hands the sum to its
+    front end, which is then unsure as a robot without a DVL (maptidal.perception.odometry)."""
+    with mission_at_rest(tmp_path) as (mission, _):
+        robot = mission.robots["rov0"]
+        assert robot.has_dvl
+        front = mission.perception.fronts["rov0"]
+        for _ in range(3):  # free water first: a first frame, and periods with the DVL in range
+            before = mission.sim.time
+            mission.sim.step({})
+            mission._count_dvl_dropouts(mission.sim.time - before)
+        assert robot.dvl_out_s == 0.0
+        mission._see(robot, mission.sim.time)
+        mission._frames["rov0"].result()
+        assert not front.odometry.unaided
+        mission.sim.place("rov0", [-1.0, 0.5, 0.15])  # on the floor
+        flown = 0.0
+        for _ in range(10):
+            before = mission.sim.time
+            mission.sim.step({})
+            mission._count_dvl_dropouts(mission.sim.time - before)
+            flown += mission.sim.time - before
+            assert not mission.sim.latest_readings("rov0")["dvl"]["valid"]
+        assert robot.dvl_out_s == pytest.approx(flown)
+        assert mission.robots["rov1"].dvl_out_s == 0.0  # no DVL: nothing to lose
+        mission._see(robot, mission.sim.time)
+        mission._frames["rov0"].result()
+        assert robot.dvl_out_s == 0.0
+        assert front.odometry.unaided
+
+
 def test_a_robot_that_lost_its_fix_is_found_again_at_its_next_sure_fix(tmp_path):
     # the halved limit is for a robot lost as unsure: one that went without a fix while 8 cm sure of
     # itself (as the default mission's robot without a DVL is) waited for many fixes to halve a limit it

@@ -374,6 +374,84 @@ def test_with_a_dvl_a_fix_moves_the_estimate_little():
     assert moved[False] > 0.95
 
 
+def test_a_dvl_that_drops_out_leaves_the_robot_as_unsure_as_one_without_until_its_next_fix():
+    """The variance written out by hand: with its DVL a robot's grows at drift_m2_s_dvl; from a frame in
+    which its DVL dropped out until its next fix, at drift_m2_s_no_dvl (adapting to refused fixes as a
+    robot without a DVL does), and its visual steps weigh as that robot's; after the fix, as before."""
+    params = OdometryParams(has_dvl=True, start_sigma_m=0.01)
+    odometry = VisualOdometry(params)
+    rotation = facing_wall()
+    here = np.array([-1.0, 0.0, 1.0])
+    # a visual step of 10 cm along +x, the dead reckoning standing still: within the 12 cm gate
+    step = (np.eye(3), -(rotation.T @ np.array([0.1, 0.0, 0.0])), 50)
+    odometry.update(CameraPose(here, rotation), None)
+    expected = 0.01**2
+    odometry.update(CameraPose(here, rotation), None, dt_s=10.0)
+    expected += params.drift_m2_s_dvl * 10.0
+    assert odometry.sigma_m**2 == pytest.approx(expected)
+    moved = odometry.update(CameraPose(here, rotation), step, dt_s=1.0).position[0] - here[0]
+    expected += params.drift_m2_s_dvl
+    assert moved == pytest.approx(0.1 * params.visual_weight)
+    start = odometry.pose.position[0]
+    odometry.update(CameraPose(here, rotation), step, dt_s=1.0, unaided_s=0.4)  # its DVL out for 0.4 s
+    expected += params.drift_m2_s_no_dvl
+    assert odometry.unaided and not odometry.dvl_aided
+    assert odometry.pose.position[0] - start == pytest.approx(0.1 * params.visual_weight_model_aided)
+    assert odometry.sigma_m**2 == pytest.approx(expected)
+    odometry.update(CameraPose(here, rotation), None, dt_s=5.0)  # the DVL back, but no fix yet
+    expected += params.drift_m2_s_no_dvl * 5.0
+    assert odometry.sigma_m**2 == pytest.approx(expected)
+    odometry.surprised()  # a fix refused: the drift adapts, as without a DVL
+    assert odometry.drift_scale == 1.5
+    odometry.update(CameraPose(here, rotation), None, dt_s=2.0)
+    expected += params.drift_m2_s_no_dvl * 1.5 * 2.0
+    assert odometry.sigma_m**2 == pytest.approx(expected)
+    odometry.correct(odometry.pose.position, sigma_m=0.02)  # found again
+    assert not odometry.unaided and odometry.drift_scale == 1.0
+    expected = expected * 0.02**2 / (expected + 0.02**2)
+    assert odometry.sigma_m**2 == pytest.approx(expected)
+    odometry.update(CameraPose(here, rotation), None, dt_s=10.0)
+    expected += params.drift_m2_s_dvl * 10.0
+    assert odometry.sigma_m**2 == pytest.approx(expected)
+    odometry.surprised()  # with its DVL keeping the say, a refused fix is the fix's error
+    assert odometry.drift_scale == 1.0
+    without = VisualOdometry(OdometryParams(has_dvl=False))  # a robot without a DVL has nothing to lose
+    without.update(CameraPose(here, rotation), None, unaided_s=1.0)
+    assert not without.unaided
+
+
+def test_a_robot_pushed_while_its_dvl_was_out_is_found_again_by_its_map():
+    """A robot with a DVL maps a wall, then is pushed 22 cm while its DVL is out (a teammate beneath it),
+    as in variant B's seed 6: its dead reckoning does not see the push. Told of the dropout, it grows
+    unsure until a fix on its anchors gets through and brings it back within 3 cm; not told, it holds
+    itself sure to a few mm, finds no fix, and stays 22 cm off."""
+    params = RelocalisationParams()
+    fresh_anchors, centre, rotation, pixels, descriptors, valid = _anchored_and_second_view(params)
+    push = np.array([0.06, 0.21, 0.0])
+    for told in (True, False):
+        anchors = fresh_anchors(params)
+        odometry = VisualOdometry(OdometryParams(has_dvl=True, start_sigma_m=0.005))
+        believed = CameraPose(centre + push, rotation)  # the dead reckoning, carried on from before
+        odometry.update(believed, None)
+        found_at = None
+        for frame in range(1, 31):
+            unaided = 1.0 if told and frame == 1 else 0.0
+            pose = odometry.update(believed, None, dt_s=1.0, unaided_s=unaided)
+            gated = anchors.refused["gate"]
+            fix, _ = anchors.relocalise(pose, pixels, descriptors, valid, odometry.sigma_m)
+            if anchors.refused["gate"] > gated:
+                odometry.surprised()
+            if fix is not None:
+                odometry.correct(fix.centre, fix.sigma_m)
+                found_at = frame
+                break
+        error = np.linalg.norm((odometry.pose.position - centre)[:2])
+        if told:
+            assert found_at is not None and error < 0.03, (found_at, error, dict(anchors.refused))
+        else:
+            assert found_at is None and error > 0.2  # its search, a few mm wide, misses its anchors
+
+
 def test_a_keypoint_between_two_look_alike_anchors_matches_neither():
     """Lowe's ratio test: two anchors whose descriptors are near twins, both in the search window of a
     keypoint, give no match (the repeated rungs of a ladder); make one distinct and the other is taken."""

@@ -485,6 +485,9 @@ class _Robot:
     surveyed: list = field(default_factory=list)
     survey_ended_s: float = -math.inf
     has_dvl: bool = True
+    # seconds since its last frame that its estimator ran without its DVL (no beam in range: a teammate
+    # beneath it, say), for its front end (maptidal.perception.odometry)
+    dvl_out_s: float = 0.0
     frame_every_s: float = 1.0
     next_frame_s: float = 0.0
     xy_correction: np.ndarray = field(default_factory=lambda: np.zeros(2))
@@ -808,6 +811,17 @@ class Mission:
         way_home = PoseTrajectory(estimate.position.copy(), estimate.yaw, home, yaw, self._limits())
         robot.recovery = Route([way_home, *self._sweep(home, yaw)])
 
+    def _count_dvl_dropouts(self, elapsed_s: float) -> None:
+        """Add ``elapsed_s`` (the control period just flown) to the DVL-less time of each robot whose DVL
+        gave no velocity in it (a beam out of its range: the floor or a teammate right beneath it). Its
+        next frame hands that time to its front end, which is then as unsure as a robot without a DVL
+        until its next fix (:mod:`maptidal.perception.odometry`)."""
+        for robot in self.robots.values():
+            if robot.active and robot.has_dvl:
+                dvl = self.sim.latest_readings(robot.name).get("dvl")
+                if dvl is not None and not dvl["valid"]:
+                    robot.dvl_out_s += elapsed_s
+
     def _teammates_heard(self, robot: _Robot, now: float) -> np.ndarray:
         """Rows ``(x, y, z, age_s)``: where each teammate's last message put it, and how long ago."""
         heard = self.auction.agents[robot.index].peer_positions.values()
@@ -1018,9 +1032,11 @@ class Mission:
                     commands[robot.name] = np.zeros(6)
             self.timing["control"] += time.perf_counter() - start
             start = time.perf_counter()
+            before = now
             self.sim.step(commands)
             self.timing["physics"] += time.perf_counter() - start
             now = self.sim.time
+            self._count_dvl_dropouts(now - before)
             for robot in self.robots.values():
                 if robot.active:
                     self._advance_activity(robot, now)
@@ -1165,8 +1181,10 @@ class Mission:
             existing,
             self._teammates_heard(robot, now),
             self._explore_request(robot),
+            dvl_out_s=robot.dvl_out_s,
             **review,
         )
+        robot.dvl_out_s = 0.0
         self._frames[robot.name] = self._gl.submit(self._draw_frame, snapshot, job)
 
     def _explore_request(self, robot: _Robot) -> ExploreRequest | None:

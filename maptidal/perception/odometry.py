@@ -18,6 +18,16 @@
 - **A gate.** Where the dead reckoning moves horizontally, a visual step that disagrees with it by more
   than ``max_disagreement_m`` is dropped as a wrong PnP solution (a planar wall fools PnP into steps
   of tens of centimetres the wrong way), as a filter gates an innovation.
+- **A DVL that drops out.** A DVL gives no velocity while a beam finds nothing in its range: over a
+  teammate passing beneath it closer than its minimum range, the robot's estimator runs on its motion
+  model instead, and a robot pushed while in contact moves as that model does not say. In variant B of
+  the tank (seed 6) the DVL robot was so carried 22 cm off in 1.5 s, and, still sure of itself to
+  5 mm, refused every fix after and made its anchors where it believed it was: it stayed 22 cm off
+  for the rest of the mission. So the robot's owner says how long in each frame the dead reckoning ran
+  without its DVL (``unaided_s``), and until its next fix the robot is as unsure as one without a DVL:
+  its variance grows at the rate of one (``drift_m2_s_no_dvl``, adapting to the fixes as it does), its
+  visual steps weigh as that robot's, and it makes no anchors once past their bound. A Kalman filter
+  whose velocity measurement is missing does the same.
 """
 
 from __future__ import annotations
@@ -73,28 +83,6 @@ class OdometryParams:
     max_drift_scale_dvl: float = 1.0
     drift_m2_s_dvl: float = 1e-6
 
-    @property
-    def horizontal_weight(self) -> float:
-        """The visual weight of the horizontal translation increment (module docstring)."""
-        if self.has_dvl:
-            return self.visual_weight
-        return self.visual_weight_model_aided if self.model_aided else 1.0
-
-    @property
-    def drift_scale_limit(self) -> float:
-        """How far the drift rate may adapt (see ``max_drift_scale``)."""
-        return self.max_drift_scale_dvl if self.has_dvl else self.max_drift_scale
-
-    @property
-    def base_drift_m2_s(self) -> float:
-        """The drift rate before adaptation (see ``drift_m2_s_no_dvl``, ``drift_m2_s_dvl``)."""
-        return self.drift_m2_s_dvl if self.has_dvl else self.drift_m2_s_no_dvl
-
-    @property
-    def dead_reckons_horizontally(self) -> bool:
-        """Whether the dead reckoning's horizontal motion means anything (a DVL or a motion model)."""
-        return self.has_dvl or self.model_aided
-
 
 def relative_motion(
     points_previous: np.ndarray, pixels_current: np.ndarray, camera_matrix: np.ndarray, params: OdometryParams
@@ -141,21 +129,41 @@ class VisualOdometry:
         self.fixes = 0  # relocalisations applied (correct)
         self.sigma_m = self.params.start_sigma_m  # the horizontal position's standard deviation
         self.drift_scale = 1.0  # how much faster than its parameter the position drifts (adapted)
+        # a robot with a DVL whose dead reckoning has run without it since its last fix
+        self.unaided = False
+
+    @property
+    def dvl_aided(self) -> bool:
+        """Whether the horizontal dead reckoning stands on a DVL now: a robot with one whose DVL has not
+        dropped out since its last fix (module docstring)."""
+        return self.params.has_dvl and not self.unaided
+
+    def _horizontal_weight(self) -> float:
+        """The visual weight of the horizontal translation increment, as the dead reckoning stands now."""
+        if self.dvl_aided:
+            return self.params.visual_weight
+        return self.params.visual_weight_model_aided if self.params.model_aided else 1.0
 
     def update(
         self,
         dead_reckoning: CameraPose,
         motion: tuple[np.ndarray, np.ndarray, int] | None,
         dt_s: float = 0.0,
+        unaided_s: float = 0.0,
     ) -> CameraPose:
         """The fused pose after one frame, from this frame's dead-reckoned pose and the visual motion
         (:func:`relative_motion`, None when PnP failed; a step longer than ``max_step_m``, or one the gate
         refuses, is dropped as a wrong solution), ``dt_s`` after the last frame (the horizontal variance
-        grows by ``drift_m2_s dt_s``). The first frame starts at the dead reckoning."""
+        grows by ``drift_m2_s dt_s``), of which the dead reckoning ran ``unaided_s`` without its DVL (a
+        robot with one is then as unsure as one without until its next fix). The first frame starts at
+        the dead reckoning."""
+        if self.params.has_dvl and unaided_s > 0.0:
+            self.unaided = True
         if self.pose is None or self._last_dr is None:
             self.pose, self._last_dr = dead_reckoning, dead_reckoning
             return self.pose
-        drift = self.params.base_drift_m2_s * self.drift_scale
+        base = self.params.drift_m2_s_dvl if self.dvl_aided else self.params.drift_m2_s_no_dvl
+        drift = base * self.drift_scale
         self.sigma_m = float(np.sqrt(self.sigma_m**2 + drift * max(dt_s, 0.0)))
         dr_step = dead_reckoning.position - self._last_dr.position
         step = dr_step
@@ -166,14 +174,13 @@ class VisualOdometry:
             visual_step = self.pose.rotation @ (-rotation.T @ translation)
             if np.linalg.norm(visual_step) > self.params.max_step_m:
                 motion = None  # faster than the vehicle can move: a wrong solution
-            elif (
-                self.params.dead_reckons_horizontally
-                and np.linalg.norm((visual_step - dr_step)[:2]) > self.params.max_disagreement_m
-            ):
+            elif (self.dvl_aided or self.params.model_aided) and np.linalg.norm(
+                (visual_step - dr_step)[:2]
+            ) > self.params.max_disagreement_m:
                 motion = None  # the gate: too far from where the dead reckoning says the camera went
                 self.gated += 1
         if motion is not None:
-            horizontal = self.params.horizontal_weight
+            horizontal = self._horizontal_weight()
             w = np.array([horizontal, horizontal, self.params.visual_weight_depth])
             step = w * visual_step + (1.0 - w) * dr_step
             self.visual_updates += 1
@@ -200,9 +207,13 @@ class VisualOdometry:
         self.pose = CameraPose(position, self.pose.rotation)
         self.sigma_m = float(np.sqrt((1.0 - gain) * self.sigma_m**2))
         self.fixes += 1
+        if self.unaided:  # found again: the DVL, back, keeps the say
+            self.unaided, self.drift_scale = False, 1.0
         return self.pose
 
     def surprised(self) -> None:
         """A fix farther off than the uncertainty allowed (or refused for it): the drift rate grows by
-        half, up to ``drift_scale_limit`` times its own."""
-        self.drift_scale = min(self.params.drift_scale_limit, 1.5 * self.drift_scale)
+        half, up to ``max_drift_scale`` times its own (``max_drift_scale_dvl`` while a DVL keeps the
+        say; a robot whose DVL dropped out adapts as one without a DVL)."""
+        limit = self.params.max_drift_scale_dvl if self.dvl_aided else self.params.max_drift_scale
+        self.drift_scale = min(limit, 1.5 * self.drift_scale)

@@ -522,6 +522,96 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             )
         ],
     ),
+    "L17": (
+        "a dropout of the DVL never marks the robot unaided (session 33)",
+        [
+            (
+                "maptidal/perception/odometry.py",
+                "        if self.params.has_dvl and unaided_s > 0.0:\n            self.unaided = True\n",
+                "        if self.params.has_dvl and unaided_s > 0.0:\n            pass\n",
+            )
+        ],
+    ),
+    "L18": (
+        "an unaided robot's variance grows at the DVL's rate",
+        [
+            (
+                "maptidal/perception/odometry.py",
+                "base = self.params.drift_m2_s_dvl if self.dvl_aided else self.params.drift_m2_s_no_dvl",
+                "base = self.params.drift_m2_s_dvl if self.params.has_dvl else self.params.drift_m2_s_no_dvl",
+            )
+        ],
+    ),
+    "L19": (
+        "a fix does not end the robot's unaided spell",
+        [
+            (
+                "maptidal/perception/odometry.py",
+                "            self.unaided, self.drift_scale = False, 1.0\n",
+                "            pass\n",
+            )
+        ],
+    ),
+    "L20": (
+        "an unaided robot's refused fixes do not speed its drift up",
+        [
+            (
+                "maptidal/perception/odometry.py",
+                "max_drift_scale_dvl if self.dvl_aided else",
+                "max_drift_scale_dvl if self.params.has_dvl else",
+            )
+        ],
+    ),
+    "L21": (
+        "an unaided robot's visual steps weigh as with its DVL",
+        [
+            (
+                "maptidal/perception/odometry.py",
+                "        if self.dvl_aided:\n            return self.params.visual_weight\n",
+                "        if self.params.has_dvl:\n            return self.params.visual_weight\n",
+            )
+        ],
+    ),
+    "L22": (
+        "the mission never counts a DVL's dropouts",
+        [
+            (
+                "maptidal/mission/run.py",
+                "                    robot.dvl_out_s += elapsed_s\n",
+                "                    pass\n",
+            )
+        ],
+    ),
+    "L23": (
+        "the dropouts not handed to the front end",
+        [
+            (
+                "maptidal/mission/run.py",
+                "            dvl_out_s=robot.dvl_out_s,\n",
+                "",
+            )
+        ],
+    ),
+    "L24": (
+        "the dropouts counted again from frame to frame",
+        [
+            (
+                "maptidal/mission/run.py",
+                "        robot.dvl_out_s = 0.0\n",
+                "",
+            )
+        ],
+    ),
+    "L25": (
+        "the front end not handing the dropouts to its odometry",
+        [
+            (
+                "maptidal/perception/frontend.py",
+                "pose = self.odometry.update(pose, motion, dt, unaided_s)",
+                "pose = self.odometry.update(pose, motion, dt)",
+            )
+        ],
+    ),
     "S1": (
         "a robot's own discoveries leave newest first",
         [
