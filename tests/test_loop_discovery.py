@@ -288,6 +288,25 @@ def test_the_robots_dense_depth_knows_the_cameras_noise(tmp_path):
             assert front.params.dense.pixel_noise_sigma == 0.0
 
 
+def test_the_views_of_a_maps_gaps_are_minted_as_tasks_found_without_a_keyframe(tmp_path):
+    """A frame's answer with no keyframe (no faces) but gap views (maptidal.map_discovery.gap_views): each
+    becomes a task of the robot's, in the ledger and the event log, marked as a gap's."""
+    from maptidal.mission.perception import FrameResult
+
+    gaps = np.array([[-1.0, 0.9, 1.0, 0.0, 1.0, 0.0], [-1.0, -0.9, 1.0, 0.0, -1.0, 0.0]])
+    with mission_at_rest(tmp_path) as (mission, _):
+        robot = mission.robots["rov1"]
+        result = FrameResult("rov1", 5.0, None, None, 0, 0, np.zeros((0, 6)), 0.0, 0.0, gap_tasks=gaps)
+        mission._use_frame_result(robot, result, 6.0)
+        known = mission.auction.agents[robot.index].tasks
+        assert len(known) == 2
+        assert np.allclose([t.position for t in known], gaps[:, :3])
+        assert len(mission.tasks) == 2
+    found = [e for e in read_events(tmp_path) if e["kind"] == "discovered"]
+    assert len(found) == 2 and all(e["gap"] and e["robot"] == "rov1" for e in found)
+    assert not [e for e in read_events(tmp_path) if e["kind"] == "keyframe"]
+
+
 def test_the_maps_settings_in_a_mission_file_are_checked(tmp_path, capsys):
     from maptidal.mission.config import load_mission
     from maptidal.paths import asset

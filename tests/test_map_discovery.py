@@ -19,6 +19,7 @@ from maptidal.map_discovery import (
     coverage_cells,
     discover_on_map,
     fit_planes,
+    gap_views,
     lift_into_free,
     lift_offsets,
     near_teammates,
@@ -716,6 +717,58 @@ def test_dense_points_give_candidates_where_the_mesh_has_no_face():
         ).candidates
         == 1
     )
+
+
+def _in_level_view(view: np.ndarray, points: np.ndarray, far_m: float = 2.0) -> np.ndarray:
+    """Which ``points`` a level view looking along +x sees, written out by hand: in front of it within
+    ``far_m``, and within half the OAK-D's field of view (78.5 x 54.1 deg) each way."""
+    depth = points[:, 0] - view[0]
+    half_h, half_v = math.radians(78.5 / 2), math.radians(54.1 / 2)
+    return (
+        (depth > 0)
+        & (depth <= far_m)
+        & (np.abs(points[:, 1] - view[1]) <= depth * math.tan(half_h))
+        & (np.abs(points[:, 2] - view[2]) <= depth * math.tan(half_v))
+    )
+
+
+def test_the_gaps_of_a_map_get_views_where_no_known_view_looks():
+    """The wall at x = 3 mapped by dense depth alone (no mesh face anywhere), and one known task looking at
+    its end near y = 1: the gap views all look at the wall along +x from the 1 m standoff, none repeats
+    the known view, and the known view and the gap views together see nearly all the wall's 10 cm cells
+    at mid-height (checked by a frustum written out by hand, as level views). None with
+    gap_candidates_m 0, or on a map without dense points."""
+    rng = np.random.default_rng(21)
+    points, ids, camera = _wall_scene(rng)
+    dense = _plane_points([3, 0, 0], [0, 1, 0], [0, 0, 1], 4.0, 2.0, 0.05, rng)
+    known = np.array([[2.0, 1.0, 1.0, 1.0, 0.0, 0.0]])
+    found = {}
+    for size in (0.0, 0.25):
+        robot_map = _map_of(points, ids, camera, MapAwareParams(gap_candidates_m=size))
+        robot_map.add_surface(camera, dense)
+        found[size] = gap_views(robot_map, camera, known)
+    assert len(found[0.0].final) == 0 and found[0.0].candidates == 0
+    gaps = found[0.25].final
+    cells = {tuple(np.floor(p / 0.25).astype(int)) for p in dense}
+    assert found[0.25].candidates == len(cells)  # one per 25 cm cell of the dense points, by hand
+    assert len(gaps) >= 1
+    for row in gaps:
+        assert row[3] > 0.95 and abs(row[0] - 2.0) < 0.1
+        assert np.linalg.norm(row[:3] - known[0, :3]) > 0.4  # not the known view again
+    wall_cells = np.unique(np.floor(dense / 0.1), axis=0) * 0.1 + 0.05
+    reach = wall_cells[(wall_cells[:, 2] > 0.55) & (wall_cells[:, 2] < 1.45)]  # what a level view reaches
+    seen = np.zeros(len(reach), bool)
+    for view in np.vstack([known, gaps]):
+        seen |= _in_level_view(view, reach)
+    assert seen.mean() > 0.9
+    assert _in_level_view(known[0], reach).mean() < 0.5  # the known view alone does not
+    # the known views count as covered: with three more of them along the wall's middle, fewer gaps
+    more = np.array([[2.0, y, 1.0, 1.0, 0.0, 0.0] for y in (1.0, 2.0, 3.0)])
+    robot_map = _map_of(points, ids, camera, MapAwareParams())
+    robot_map.add_surface(camera, dense)
+    assert len(gap_views(robot_map, camera, more).final) < len(gap_views(robot_map, camera, None).final)
+    bare = _map_of(points, ids, camera, MapAwareParams())  # landmarks, no dense points
+    assert len(gap_views(bare, camera, known).final) == 0
 
 
 def test_the_water_surface_seen_from_below_is_no_structure():

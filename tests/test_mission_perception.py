@@ -12,7 +12,16 @@ import numpy as np
 import pytest
 
 from maptidal.discovery import DiscoveryParams
-from maptidal.mission.perception import FrameJob, InlinePerception, PerceptionProcess, start_perception
+from maptidal.exploration import FrontierParams
+from maptidal.map_discovery import MapAwareParams, RobotMap, gap_views
+from maptidal.mission.perception import (
+    ExploreRequest,
+    FrameJob,
+    InlinePerception,
+    PerceptionProcess,
+    perceive,
+    start_perception,
+)
 from maptidal.perception.frontend import FrontEnd, FrontEndParams
 from maptidal.perception.keyframing import KeyframeParams
 from maptidal.perception.recording import CameraIntrinsics, CameraPose
@@ -136,3 +145,49 @@ def test_the_worker_serves_only_the_robots_it_was_started_for():
             perception.configure(_fronts(["rov0", "rov1"]), DiscoveryParams())
     finally:
         perception.close()
+
+
+def test_a_robot_with_no_look_left_gets_views_of_its_maps_gaps_unless_a_teammate_holds_its_looks():
+    """A robot's map holds a wall at x = 3 by dense depth alone, and its exploration counts nothing
+    (the box it counts lies far away): no look is left. Asking for looks then brings the views of the
+    map's gaps (maptidal.map_discovery.gap_views); with a look left, or looks held only for a teammate
+    near them, it brings none."""
+    rng = np.random.default_rng(3)
+    y, z = np.meshgrid(np.arange(0.0, 4.0, 0.05), np.arange(0.0, 2.0, 0.05))
+    wall = np.column_stack([np.full(y.size, 3.0), y.ravel(), z.ravel()]) + rng.normal(0, 0.005, (y.size, 3))
+    camera = np.array([1.0, 2.0, 1.0])
+    rotation = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # looking along +x
+    nothing = FrontierParams(gain_box=((50.0, 50.0, 50.0), (51.0, 51.0, 51.0)))
+    everything = FrontierParams()
+    blank = np.zeros((HEIGHT, WIDTH, 3), np.uint8)
+
+    def answer(params: FrontierParams, teammates=None):
+        robot_map = RobotMap(MapAwareParams())
+        robot_map.add_surface(camera, wall)
+        job = FrameJob(
+            "rov0",
+            1.0,
+            blank,
+            blank,
+            CameraPose(camera, rotation),
+            CameraPose(camera, rotation),
+            np.zeros((0, 6)),
+            teammates,
+            ExploreRequest(params, camera.copy(), np.zeros((0, 3))),
+        )
+        front = FrontEnd(INTRINSICS, "truth", FrontEndParams())
+        return perceive(front, job, DiscoveryParams(), robot_map)
+
+    explored = answer(nothing)
+    assert len(explored.frontier) == 0 and len(explored.gap_tasks) >= 1
+    assert np.all(explored.gap_tasks[:, 3] > 0.95)  # looking at the wall
+    exploring = answer(everything)
+    assert len(exploring.frontier) > 0 and len(exploring.gap_tasks) == 0
+    # teammates all about the water the looks stand in, none near the wall or its views
+    grid = np.stack(np.meshgrid([0.3, 0.9, 1.5], np.arange(-1.0, 5.01, 0.6), [0.3, 0.9, 1.5]), -1)
+    teammates = np.column_stack([grid.reshape(-1, 3), np.zeros(grid.size // 3)])
+    held = answer(everything, teammates)
+    assert len(held.frontier) == 0 and held.held_for_teammates > 0 and len(held.gap_tasks) == 0
+    robot_map = RobotMap(MapAwareParams())
+    robot_map.add_surface(camera, wall)
+    assert len(gap_views(robot_map, camera, np.zeros((0, 6)), DiscoveryParams(), teammates).final) >= 1

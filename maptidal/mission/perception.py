@@ -27,7 +27,7 @@ import numpy as np
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
 from maptidal.executors import release_in_child, signals_held
 from maptidal.exploration import FrontierParams, explore_views
-from maptidal.map_discovery import RobotMap, discover_on_map, views_left_to_take
+from maptidal.map_discovery import RobotMap, discover_on_map, gap_views, views_left_to_take
 from maptidal.perception.dense import dense_points
 from maptidal.perception.frontend import FrontEnd
 from maptidal.perception.recording import CameraPose
@@ -101,6 +101,9 @@ class FrameResult:
     held_for_teammates: int = 0
     # the keys of the reviewed tasks (FrameJob.to_review) whose views the views taken leave nothing to
     retired: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    # with no look left: views of what the map holds that no known view holds
+    # (maptidal.map_discovery.gap_views)
+    gap_tasks: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
 
 
 def perceive(
@@ -165,7 +168,7 @@ def perceive(
         discovery_s = time.perf_counter() - start
     else:
         discovery_s = 0.0
-    frontier, held_for_teammates = None, 0
+    frontier, held_for_teammates, gaps = None, 0, np.zeros((0, 6))
     if job.explore is not None and robot_map is not None:
         start = time.perf_counter()
         request = job.explore
@@ -178,6 +181,12 @@ def perceive(
                 robot_map, job.pose.position, request.params, request.launch, None, request.visited
             )
             held_for_teammates = len(alone)
+        if len(frontier) == 0 and held_for_teammates == 0:
+            # explored: what its map holds that no known view holds gets views of its own
+            try:
+                gaps = gap_views(robot_map, job.pose.position, job.existing, discovery, job.teammates).final
+            except DiscoveryInputError:
+                gaps = np.zeros((0, 6))
         discovery_s += time.perf_counter() - start
     return FrameResult(
         job.robot,
@@ -193,6 +202,7 @@ def perceive(
         frontier,
         held_for_teammates,
         retired,
+        gaps,
     )
 
 

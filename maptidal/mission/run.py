@@ -1234,29 +1234,19 @@ class Mission:
             robot.frontier_held = result.held_for_teammates
         if result.faces:  # a keyframe: its review stands for the path as it was then
             robot.covered = {int(key) for key in result.retired}
-        if result.faces == 0 or self.params.planner != "maptidal":
+        if self.params.planner != "maptidal":
             return  # a baseline's tasks are planned, not discovered: the frames serve localisation only
+        if len(result.gap_tasks):  # explored: views of what its map holds that no known view holds
+            self._mint(robot, result.gap_tasks, now, result.time_s, gap=True)
+        if result.faces == 0:
+            return
         start = time.perf_counter()
-        agent = self.auction.agents[robot.index]
         new = result.new_tasks
         if self.params.discovery_mode == "map-aware":
             keep = np.ones(len(new), bool)  # checked on the robot's own map, in its perception
         else:
             keep = reachable(self.scenario.tank, new, self.params.discovery.standoff)
-        for row, ok in zip(new, keep, strict=True):
-            if not ok:
-                continue
-            task = agent.discover_task(row[:3], row[3:], now_s=now)
-            self._ledger(task, robot.name, now)
-            self.writer.event(
-                now,
-                "discovered",
-                robot=robot.name,
-                task=task.key,
-                position=task.position.tolist(),
-                direction=task.direction.tolist(),
-                frame_s=round(result.time_s, 3),
-            )
+        self._mint(robot, new[keep], now, result.time_s)
         self.writer.event(
             now,
             "keyframe",
@@ -1268,6 +1258,24 @@ class Mission:
             **({"rules": result.rules} if result.rules is not None else {}),
         )
         self.timing["allocation"] += time.perf_counter() - start
+
+    def _mint(self, robot: _Robot, rows: np.ndarray, now: float, frame_s: float, gap: bool = False) -> None:
+        """Mint task rows ``(N, 6)`` the robot found into its CBBA agent, the ledger and the event log
+        (``gap``: views of its map's gaps, :func:`maptidal.map_discovery.gap_views`)."""
+        agent = self.auction.agents[robot.index]
+        for row in rows:
+            task = agent.discover_task(row[:3], row[3:], now_s=now)
+            self._ledger(task, robot.name, now)
+            self.writer.event(
+                now,
+                "discovered",
+                robot=robot.name,
+                task=task.key,
+                position=task.position.tolist(),
+                direction=task.direction.tolist(),
+                frame_s=round(frame_s, 3),
+                **({"gap": True} if gap else {}),
+            )
 
     def _advance_activity(self, robot: _Robot, now: float) -> None:
         agent = self.auction.agents[robot.index]

@@ -40,7 +40,12 @@ TANK_TESTS = ["tests/test_closed_tank.py", "tests/test_world_geometry.py"]
 SIGNAL_TESTS = ["tests/test_signals.py"]
 BATCHED_TESTS = ["tests/test_batched.py"]
 NATIVE_TESTS = ["tests/test_native_flight.py"]
-DENSE_TESTS = ["tests/test_dense_depth.py", "tests/test_map_discovery.py", "tests/test_loop_discovery.py"]
+DENSE_TESTS = [
+    "tests/test_dense_depth.py",
+    "tests/test_map_discovery.py",
+    "tests/test_loop_discovery.py",
+    "tests/test_mission_perception.py",
+]
 PLANNER_TESTS = ["tests/test_planners.py"]
 KEEP_CLEAR_TESTS = [
     "tests/test_clearance.py",
@@ -1312,6 +1317,62 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             (
                 "maptidal/map_discovery.py",
                 "            face_seen = _covered(existing_rows, looked_at, camera)\n",
+                "            pass\n",
+            )
+        ],
+    ),
+    "D42": (
+        "no views of a map's gaps (session 33)",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "    if cell_m <= 0 or len(robot_map.surface) == 0:\n",
+                "    if True:\n",
+            )
+        ],
+    ),
+    "D43": (
+        "the gaps judged without the known tasks' views",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "        position,\n        existing,\n        discovery,\n        teammates=teammates,\n"
+                "        surface_points=robot_map.surface.rows(),",
+                "        position,\n        None,\n        discovery,\n        teammates=teammates,\n"
+                "        surface_points=robot_map.surface.rows(),",
+            )
+        ],
+    ),
+    "D44": (
+        "the gaps' candidates on the keyframes' dense-candidate grid (none by default)",
+        [("maptidal/map_discovery.py", "        candidate_cell_m=cell_m,\n", "")],
+    ),
+    "D45": (
+        "the gaps looked for while a teammate holds the robot's looks",
+        [
+            (
+                "maptidal/mission/perception.py",
+                "        if len(frontier) == 0 and held_for_teammates == 0:",
+                "        if len(frontier) == 0:",
+            )
+        ],
+    ),
+    "D46": (
+        "the gaps looked for while looks are left",
+        [
+            (
+                "maptidal/mission/perception.py",
+                "        if len(frontier) == 0 and held_for_teammates == 0:",
+                "        if held_for_teammates == 0:",
+            )
+        ],
+    ),
+    "D47": (
+        "the gaps' views not minted as tasks",
+        [
+            (
+                "maptidal/mission/run.py",
+                "            self._mint(robot, result.gap_tasks, now, result.time_s, gap=True)\n",
                 "            pass\n",
             )
         ],
