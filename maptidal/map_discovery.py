@@ -446,8 +446,9 @@ def refit_on_faces(
     normal ``(M, 3)`` (sign arbitrary) and whether it holds ``(M,)``: at least ``min_support`` points
     kept, spanning the plane both ways (middle principal variance at least ``plane_tolerance_m``
     squared), gathered near it (``min_band_concentration`` of them within half the tolerance), and the
-    face's corners and centroid within ``plane_tolerance_m`` of it. A degenerate face
-    (a point, a line) or one with NaNs does not hold. ``balls``, each face centroid's neighbour list
+    face's corners and centroid within ``plane_tolerance_m`` of it. A face shrunk to a point (a dense
+    candidate) starts from the plane of its ``min_support`` nearest map points; a line, or a face with
+    NaNs, does not hold. ``balls``, each face centroid's neighbour list
     within ``support_radius_m`` when the caller has them already (:func:`fit_planes`), saves the search."""
     map_points = np.asarray(map_points, float).reshape(-1, 3)
     triangles = np.asarray(triangles, float).reshape(-1, 3, 3)
@@ -459,7 +460,18 @@ def refit_on_faces(
     centres = triangles.mean(axis=1)
     cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
     length = np.linalg.norm(cross, axis=1)
-    usable = np.flatnonzero(np.isfinite(cross).all(axis=1) & (length > 1e-12))
+    start = np.full((len(triangles), 3), np.nan)  # each face's plane to start from: its own normal
+    flat = np.isfinite(cross).all(axis=1) & (length > 1e-12)
+    start[flat] = cross[flat] / length[flat, None]
+    # a face shrunk to a point (a dense-depth candidate) has no plane of its own: it starts from the
+    # plane of its nearest min_support map points, which lie on its own surface however near a crease
+    point = np.isfinite(triangles).all(axis=(1, 2)) & (np.ptp(triangles, axis=1).max(axis=1) == 0.0)
+    if point.any() and len(map_points) >= params.min_support:
+        tree = tree or cKDTree(map_points)
+        _, nearest = tree.query(centres[point], k=params.min_support)
+        local = map_points[nearest] - map_points[nearest].mean(axis=1, keepdims=True)
+        start[point] = np.linalg.eigh(np.einsum("nki,nkj->nij", local, local))[1][:, :, 0]
+    usable = np.flatnonzero(np.isfinite(start).all(axis=1))
     # each ball thinned to FIT_POINTS, as for the first fit
     if balls is None:
         tree = tree or cKDTree(map_points)
@@ -478,7 +490,7 @@ def refit_on_faces(
     index = np.concatenate([found for found in neighbours if len(found) >= params.min_support])
     offsets = map_points[index.astype(np.intp)] - centres[rows][owner]
     centre = np.zeros((fits, 3))  # each plane's point, in those offsets
-    normal = cross[rows] / length[rows, None]
+    normal = start[rows]
     alive = np.ones(fits, bool)
 
     def band(plane_centre, plane_normal):

@@ -188,6 +188,41 @@ def _cloud_ball(rng, centre, radius, count):
     return np.asarray(centre, float) + directions * radius * rng.uniform(0, 1, (count, 1)) ** (1 / 3)
 
 
+def test_a_dense_point_on_the_wall_beside_the_floor_is_fitted_again_from_its_nearest_points():
+    """A dense-depth candidate is a face shrunk to a point: no plane of its own. Its second try starts
+    from the plane of its nearest map points, and comes out on the wall's written normal; the same points
+    as a line (two corners apart) still do not hold."""
+    rng = np.random.default_rng(32)
+    points, ids, camera = _wall_scene(rng)
+    params = MapAwareParams(min_new_fraction=0.0, min_new_points=1)
+    heights = (0.1, 0.2, 0.3)
+    spots = np.array([points[_face_at(points, [3.0, 2.0, z])[0]] for z in heights])
+    triangles = np.repeat(spots[:, None, :], 3, axis=1)
+    _, _, variation, _ = fit_planes(points, spots, params.support_radius_m, params.min_support)
+    assert (variation > params.max_surface_variation).all()  # the ball holds the floor too
+    centre, normal, holds = refit_on_faces(points, triangles, params)
+    assert holds.all()
+    for row in range(len(heights)):
+        assert _angle_deg(normal[row], [1.0, 0.0, 0.0]) < 5.0
+        assert centre[row, 0] == pytest.approx(3.0, abs=0.02)
+    line = triangles.copy()
+    line[:, 2] = line[:, 0] + [0.0, 0.1, 0.0]
+    line[:, 1] = line[:, 0] + [0.0, 0.05, 0.0]  # three corners on one line
+    assert not refit_on_faces(points, line, params)[2].any()
+    # in discovery, as dense candidates: level views of the wall, counted as refitted
+    result = discover_on_map(
+        _map_of(points, ids, camera, params),
+        np.zeros((0, 3)),
+        np.zeros((0, 3), int),
+        camera,
+        surface_points=spots,
+        candidate_cell_m=0.05,
+    )
+    assert result.refitted == 3 and result.not_planar == 0 and len(result.final) >= 1
+    for row in result.final:
+        assert _angle_deg(row[3:], [1.0, 0.0, 0.0]) < 5.0
+
+
 def test_a_face_on_the_wall_beside_the_floor_is_fitted_again_on_the_wall_alone():
     rng = np.random.default_rng(31)
     points, ids, camera = _wall_scene(rng)

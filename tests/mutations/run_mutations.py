@@ -1377,6 +1377,26 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             )
         ],
     ),
+    "D48": (
+        "a dense point given no plane to start its second try from",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "    if point.any() and len(map_points) >= params.min_support:",
+                "    if False:",
+            )
+        ],
+    ),
+    "D49": (
+        "a dense point's second try started across its nearest points, not on their plane",
+        [
+            (
+                "maptidal/map_discovery.py",
+                'np.einsum("nki,nkj->nij", local, local))[1][:, :, 0]',
+                'np.einsum("nki,nkj->nij", local, local))[1][:, :, 2]',
+            )
+        ],
+    ),
     "D36": (
         "dense depth without its texture test",
         [
