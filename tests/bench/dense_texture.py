@@ -21,7 +21,8 @@ import numpy as np
 from maptidal.camera import StereoCameraParams
 from maptidal.envs.scenario import load_scenario
 from maptidal.envs.simulation import Simulation
-from maptidal.perception.dense import DenseDepthParams, disparity_map
+from maptidal.perception.dense import DenseDepthParams, dense_points
+from maptidal.perception.recording import CameraIntrinsics
 
 ROOT = Path(__file__).resolve().parents[2]
 TANKS = {
@@ -32,21 +33,18 @@ TANKS = {
 FAR_CLIP_M = 40.0
 
 
-def classify(disparity: np.ndarray, depth: np.ndarray, fx: float, baseline_m: float, params) -> dict:
-    """Counts of a frame's sampled dense points (one per ``stride_px`` cell, within ``max_depth_m``):
-    accurate, wrong, and wrong where the pixel sees nothing near."""
-    half = params.stride_px // 2
-    d = disparity[half :: params.stride_px, half :: params.stride_px].astype(float)
-    truth = depth[half :: params.stride_px, half :: params.stride_px].astype(float)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        z = fx * baseline_m / d
-    kept = np.isfinite(z) & (z <= params.max_depth_m)
-    error = np.abs(z - truth)
+def classify(points: np.ndarray, depth: np.ndarray, k: CameraIntrinsics) -> dict:
+    """Counts of a frame's dense points (:func:`dense_points` in the camera's own frame): accurate, wrong,
+    and wrong where the pixel sees nothing near, each against the renderer's depth at its pixel."""
+    u = np.round(points[:, 0] / points[:, 2] * k.fx + k.cx).astype(int)
+    v = np.round(points[:, 1] / points[:, 2] * k.fy + k.cy).astype(int)
+    truth = depth[v, u].astype(float)
+    error = np.abs(points[:, 2] - truth)
     return {
-        "points": int(kept.sum()),
-        "accurate": int((kept & (error < np.maximum(0.1, 0.05 * truth))).sum()),
-        "wrong": int((kept & (error > 0.3)).sum()),
-        "far clip": int((kept & (error > 0.3) & (truth > FAR_CLIP_M)).sum()),
+        "points": len(points),
+        "accurate": int((error < np.maximum(0.1, 0.05 * truth)).sum()),
+        "wrong": int((error > 0.3).sum()),
+        "far clip": int(((error > 0.3) & (truth > FAR_CLIP_M)).sum()),
     }
 
 
@@ -57,7 +55,16 @@ def measure(path: Path, poses: int, seed: int = 1) -> dict[str, dict[str, int]]:
     sim = Simulation(scenario, camera=StereoCameraParams(width=320, height=200), water_backend="prefer-gl")
     sim.reset(seed=0)
     calibration = sim.intrinsics()
-    fx, baseline = calibration["K"][0][0], calibration["baseline_m"]
+    matrix = calibration["K"]
+    k = CameraIntrinsics(
+        calibration["width"],
+        calibration["height"],
+        matrix[0][0],
+        matrix[1][1],
+        matrix[0][2],
+        matrix[1][2],
+        calibration["baseline_m"],
+    )
     robot, *others = sim.robots
     for index, other in enumerate(others):
         sim.place(other, [-5.5, 0.5 * index, 0.3])  # down the tank, out of view
@@ -78,7 +85,8 @@ def measure(path: Path, poses: int, seed: int = 1) -> dict[str, dict[str, int]]:
             sim.place(robot, position, yaw_rad=rng.uniform(-math.radians(115), math.radians(115)))
             left, right, depth, _ = sim.render_stereo(robot, depth=True)
             for name, params in settings.items():
-                counts = classify(disparity_map(left, right, params), depth, fx, baseline, params)
+                points = dense_points(left, right, k, np.zeros(3), np.eye(3), params)
+                counts = classify(points, depth, k)
                 for key, value in counts.items():
                     totals[name][key] += value
     finally:
