@@ -4,6 +4,7 @@ log after a kill -9, and bad mission files."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -39,16 +40,61 @@ def short_mission(tmp_path_factory):
     address = {name: sim.model.jnt_qposadr[sim.model.body(f"{name}/base").jntadr[0]] for name in positions}
     step = sim.step
 
+    # and each robot's state after each control period, for the time-use test
+    states: dict[str, list] = {name: [] for name in sim.robots}
+
     def recorded_step(commands=None, mode="pilot"):
         result = step(commands, mode)
         for name, track in positions.items():
             track.append(sim.data.qpos[address[name] : address[name] + 3].copy())
+            robot = mission.robots[name]
+            states[name].append((sim.time, robot.activity, robot.lost, robot.yielding, robot.explored))
         return result
 
     sim.step = recorded_step
     document = mission.run()
     mission.true_positions = {name: np.array(track) for name, track in positions.items()}
+    mission.recorded_states = states
     return mission, document, out
+
+
+def test_each_robots_time_is_told_by_occupation_period_by_period(short_mission):
+    """Every control period goes to one occupation, the first that holds of: not launched, failed, lost,
+    giving way, then the activity (first sweep, surveying, tasks; idle, or done once explored); counted
+    here again from each robot's state after each period, and the spans run end to end."""
+    mission, document, _ = short_mission
+    end = document["sim_time_s"]
+    for name, states in mission.recorded_states.items():
+        expected: dict[str, float] = {}
+        previous = 0.0
+        for time_s, activity, lost, yielding, explored in states:
+            if activity == "waiting":
+                kind = "not launched"
+            elif activity == "failed":
+                kind = "failed"
+            elif lost:
+                kind = "lost"
+            elif yielding:
+                kind = "giving way"
+            else:
+                kind = {"explore": "first sweep", "survey": "surveying", "fly": "tasks"}.get(
+                    activity, "done" if explored else "idle"
+                )
+            expected[kind] = expected.get(kind, 0.0) + time_s - previous
+            previous = time_s
+        use = document["time_use"][name]
+        assert use["seconds"].keys() == expected.keys()
+        for kind, seconds in expected.items():
+            assert use["seconds"][kind] == pytest.approx(seconds, abs=2e-3)
+        assert sum(use["seconds"].values()) == pytest.approx(end, abs=2e-3)
+        spans = use["spans"]
+        assert spans[0][0] == 0.0 and spans[-1][1] == pytest.approx(end, abs=1e-3)
+        assert all(a[1] == b[0] and a[2] != b[2] for a, b in itertools.pairwise(spans))
+        assert spans[0][2] == "first sweep"  # every robot starts with its sweep
+    metrics = mission_metrics(document)
+    for key, kind in (("surveying_s", "surveying"), ("lost_s", "lost")):
+        total = sum(row["seconds"].get(kind, 0.0) for row in document["time_use"].values())
+        assert metrics[key] == pytest.approx(total, abs=1e-6)
 
 
 def test_a_mission_cut_off_by_its_cap_says_what_was_left(short_mission):

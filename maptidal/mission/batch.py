@@ -53,6 +53,8 @@ METRICS = {
     "path_m": "m travelled, the team's",
     "thruster_energy_kj": "kJ drawn by the team's thrusters (T200 power law)",
     "contact_s": "robot-seconds touching the tank or a teammate",
+    "surveying_s": "robot-seconds surveying the map's frontier",
+    "lost_s": "robot-seconds lost (no visual fix, or too unsure)",
     "messages": "messages",
     "bytes": "bytes",
     "lost": "messages lost",

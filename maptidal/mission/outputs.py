@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from maptidal.files import atomic_write_bytes, atomic_write_json, atomic_write_text, save_png
+from maptidal.mission.time_use import OCCUPATION_COLOURS, OCCUPATIONS
 
 EVENTS = "events.jsonl"
 TRAJECTORIES = "trajectories.csv"
@@ -270,7 +271,7 @@ def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: t
         )
 
     events = read_events(root) if (root / EVENTS).is_file() else []
-    figure, axis = plt.subplots(figsize=(8, 3))
+    figure, axis = plt.subplots(figsize=(8, 3.8))
     marks = {"discovered": ("o", "found"), "flying": ("^", "allocated / flying"), "done": ("s", "done")}
     for kind, (marker, label) in marks.items():
         for k, name in enumerate(robots):
@@ -288,13 +289,32 @@ def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: t
         if spans:
             axis.broken_barh(spans, (k - 0.3, 0.6), color="0.8", zorder=0, label=label)
             label = None  # once in the legend
+    # where each robot's time went: a thin band under its marks, coloured by occupation
+    shown: set[str] = set()
+    for k, name in enumerate(robots):
+        spans = document.get("time_use", {}).get(name, {}).get("spans", [])
+        for kind in OCCUPATIONS:
+            bars = [(a, b - a) for a, b, of in spans if of == kind and b > a]
+            if bars:
+                axis.broken_barh(
+                    bars,
+                    (k - 0.45, 0.12),
+                    color=OCCUPATION_COLOURS[kind],
+                    zorder=0,
+                    label=None if kind in shown else kind,
+                )
+                shown.add(kind)
     for event in events:
         if event["kind"] == "fail":
             axis.axvline(event["t"], color="red", lw=1)
     axis.set_yticks(range(len(robots)), robots)
     axis.set_xlabel("simulated time (s)")
-    axis.set_title("Tasks found, allocated and done per robot (red line: a failure; grey: standing down)")
-    axis.legend(fontsize=7)
+    axis.set_title(
+        "Tasks found, allocated and done per robot (red line: a failure; grey: standing down; "
+        "band: occupation)",
+        fontsize=9,
+    )
+    axis.legend(fontsize=7, ncol=5, loc="upper center", bbox_to_anchor=(0.5, -0.3))
     figure.tight_layout()
     save_png(figure, root / "timeline.png")
 
@@ -417,6 +437,7 @@ def mission_metrics(document: dict) -> dict:
         # the first time the scored views had seen 95 % of the walls (None: never)
         "time_to_95_s": time_to_coverage(document.get("coverage_timeline", []), 95.0),
         **team_odometry(document),  # path_m, thruster_energy_kj, contact_s
+        **team_time_use(document),  # surveying_s, lost_s
         "messages": None if comms is None else int(comms.get("messages", 0)),
         "bytes": None if comms is None else int(comms.get("bytes", 0)),
         "lost": None if comms is None else int(comms.get("lost", 0)),
@@ -429,6 +450,40 @@ def mission_metrics(document: dict) -> dict:
             else sum(row["lost"] for row in document["tasks_lost"].values())
         ),
     }
+
+
+def team_time_use(document: dict) -> dict:
+    """The team's robot-seconds surveying the map's frontier (``surveying_s``) and lost (``lost_s``),
+    from ``mission.json``'s ``time_use`` (:mod:`maptidal.mission.time_use`); None for a document without
+    it."""
+    use = document.get("time_use")
+    if not use:
+        return {"surveying_s": None, "lost_s": None}
+    return {
+        f"{key}_s": round(sum(row["seconds"].get(kind, 0.0) for row in use.values()), 3)
+        for key, kind in (("surveying", "surveying"), ("lost", "lost"))
+    }
+
+
+def time_use_lines(document: dict) -> list[str]:
+    """``report.md``'s table of where each robot's time went (seconds per occupation); none for a
+    document without ``time_use``."""
+    use = document.get("time_use")
+    if not use:
+        return []
+    kinds = [k for k in OCCUPATIONS if any(k in row["seconds"] for row in use.values())]
+    rows = ["| robot | " + " | ".join(kinds) + " |", "|---" * (len(kinds) + 1) + "|"]
+    for name, row in use.items():
+        rows.append(f"| {name} | " + " | ".join(f"{row['seconds'].get(k, 0.0):.0f}" for k in kinds) + " |")
+    return [
+        "## Where each robot's time went",
+        "",
+        "Simulated seconds per occupation, the first that held winning: lost (no fix, or too unsure), "
+        "giving way to a teammate, then what it was doing (the timeline shows when).",
+        "",
+        *rows,
+        "",
+    ]
 
 
 def report_markdown(document: dict) -> str:
@@ -453,6 +508,7 @@ def report_markdown(document: dict) -> str:
         *verification_lines(document),
         *sharing_lines(document),
         *localisation_lines(document),
+        *time_use_lines(document),
         *timing_lines(document),
         *(
             [

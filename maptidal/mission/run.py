@@ -74,6 +74,7 @@ from maptidal.mission.outputs import MissionWriter
 from maptidal.mission.perception import ExploreRequest, FrameJob, FrameResult, start_perception
 from maptidal.mission.routes import survey_route, sweep_legs
 from maptidal.mission.sharing import sharing_table, tasks_lost
+from maptidal.mission.time_use import TimeUse, occupation
 from maptidal.mission.verification import check_view, pitch_to_fly, view_pitch
 from maptidal.mission.video import MissionVideo
 from maptidal.perception.dense import DenseDepthParams
@@ -483,6 +484,7 @@ class _Robot:
     frontier_frame_s: float = -math.inf
     frontier_held: int = 0  # with no look left: how many were left out for being near a teammate
     surveyed: list = field(default_factory=list)
+    time_use: TimeUse = field(default_factory=TimeUse)  # where its mission time went
     survey_ended_s: float = -math.inf
     has_dvl: bool = True
     # seconds since its last frame that its estimator ran without its DVL (no beam in range: a teammate
@@ -822,6 +824,13 @@ class Mission:
                 if dvl is not None and not dvl["valid"]:
                     robot.dvl_out_s += elapsed_s
 
+    def _count_time_use(self, now: float, elapsed_s: float) -> None:
+        """Give the control period just flown (``elapsed_s``, ending at ``now``) to each robot's
+        occupation in it (:mod:`maptidal.mission.time_use`)."""
+        for robot in self.robots.values():
+            kind = occupation(robot.activity, robot.lost, robot.yielding, robot.explored)
+            robot.time_use.add(now, elapsed_s, kind)
+
     def _teammates_heard(self, robot: _Robot, now: float) -> np.ndarray:
         """Rows ``(x, y, z, age_s)``: where each teammate's last message put it, and how long ago."""
         heard = self.auction.agents[robot.index].peer_positions.values()
@@ -1037,6 +1046,7 @@ class Mission:
             self.timing["physics"] += time.perf_counter() - start
             now = self.sim.time
             self._count_dvl_dropouts(now - before)
+            self._count_time_use(now, now - before)
             for robot in self.robots.values():
                 if robot.active:
                     self._advance_activity(robot, now)
@@ -1576,6 +1586,8 @@ class Mission:
             },
             # the places each robot flew to to look at its map's frontier (MissionParams.explore)
             "surveys": {r.name: len(r.surveyed) for r in self.robots.values()},
+            # where each robot's time went: seconds per occupation, and its spans (time_use)
+            "time_use": {r.name: r.time_use.as_dict(now) for r in self.robots.values()},
             "comms": {
                 "messages": stats.transmissions,
                 "bytes": stats.bytes,

@@ -67,6 +67,10 @@ EXPLORE_TESTS = [
     "tests/test_loop_discovery.py::test_each_keyframes_dense_depth_maps_the_walls_where_they_are",
     "tests/test_loop_discovery.py::test_an_idle_robot_surveys_its_best_look_waits_for_a_teammate_and_then_has_explored",
 ]
+TIME_USE_TESTS = [
+    "tests/test_time_use.py",
+    "tests/test_mission.py::test_each_robots_time_is_told_by_occupation_period_by_period",
+]
 STAND_DOWN_TESTS = [
     "tests/test_allocation.py::test_a_robot_standing_down_leaves_its_tasks_to_the_team_until_it_resumes",
     "tests/test_localisation_loop.py::test_a_robot_still_lost_after_its_recovery_stands_down_until_it_has_a_fix",
@@ -89,6 +93,7 @@ TESTS_OF_GROUP = {
     "X": REGION_TESTS,
     "Y": EXPLORE_TESTS,
     "Z": STAND_DOWN_TESTS,
+    "U": TIME_USE_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -1689,6 +1694,38 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "maptidal/mission/routes.py",
                 "        PoseTrajectory(position, yaw + sweep_rad, position, yaw - sweep_rad, limits),\n",
                 "        PoseTrajectory(position, yaw + sweep_rad, position, yaw, limits),\n",
+            )
+        ],
+    ),
+    "U1": (
+        "giving way counts before lost",
+        [
+            (
+                "maptidal/mission/time_use.py",
+                '    if lost:\n        return "lost"\n    if yielding:\n        return "giving way"\n',
+                '    if yielding:\n        return "giving way"\n    if lost:\n        return "lost"\n',
+            )
+        ],
+    ),
+    "U2": (
+        "a period counted to the occupation before it",
+        [
+            (
+                "maptidal/mission/time_use.py",
+                "        self.seconds[kind] = self.seconds.get(kind, 0.0) + elapsed_s",
+                "        self.seconds[self._current or kind] = (\n"
+                "            self.seconds.get(self._current or kind, 0.0) + elapsed_s\n"
+                "        )",
+            )
+        ],
+    ),
+    "U3": (
+        "the batch's lost seconds are the surveying ones",
+        [
+            (
+                "maptidal/mission/outputs.py",
+                'for key, kind in (("surveying", "surveying"), ("lost", "lost"))',
+                'for key, kind in (("surveying", "surveying"), ("lost", "surveying"))',
             )
         ],
     ),
