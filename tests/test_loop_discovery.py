@@ -188,6 +188,21 @@ def test_an_idle_robot_surveys_its_best_look_waits_for_a_teammate_and_then_has_e
     assert ("surveying", "rov0") in kinds and ("explored", "rov0") in kinds and ("explored", "rov1") in kinds
 
 
+def test_with_survey_without_dvl_off_only_the_robots_with_a_dvl_survey(tmp_path):
+    with mission_at_rest(tmp_path, survey_without_dvl=False) as (mission, _):
+        look = np.array([[-1.0, 0.5, 1.0, 3.0, 2.0, 1.5]])
+        for name in ("rov0", "rov1"):
+            robot = mission.robots[name]
+            robot.activity, robot.survey_ended_s = "idle", 10.0
+            robot.frontier, robot.frontier_frame_s = look.copy(), 10.5
+            mission._explore(robot, 11.0)
+        assert mission.robots["rov0"].has_dvl and mission.robots["rov0"].activity == "survey"
+        rov1 = mission.robots["rov1"]
+        assert not rov1.has_dvl and rov1.activity == "idle" and rov1.explored and rov1.surveyed == []
+    explored = [e for e in read_events(tmp_path) if e["kind"] == "explored"]
+    assert [(e["robot"], e["surveys"], e.get("without_dvl")) for e in explored] == [("rov1", 0, True)]
+
+
 def test_a_robot_that_stops_short_of_its_viewpoint_gives_the_task_up_only_once_still_for_stall_s(tmp_path):
     with mission_at_rest(tmp_path) as (mission, params):
         robot = mission.robots["rov0"]
@@ -308,7 +323,7 @@ def test_the_views_of_a_maps_gaps_are_minted_as_tasks_found_without_a_keyframe(t
 
 
 def test_the_maps_settings_in_a_mission_file_are_checked(tmp_path, capsys):
-    from maptidal.mission.config import load_mission
+    from maptidal.mission.config import load_mission, prepare_mission
     from maptidal.paths import asset
 
     base = asset("scenarios", "mission.toml").read_text()
@@ -323,6 +338,7 @@ def test_the_maps_settings_in_a_mission_file_are_checked(tmp_path, capsys):
         return err[0]
 
     assert "dense_depth must be true or false" in refused('dense_depth = "yes"')
+    assert "survey_without_dvl must be true or false" in refused("survey_without_dvl = 0")
     assert "dense_candidates_m" in refused("dense_candidates_m = -0.25")
     path.write_text(base + "\n[mission]\ndense_depth = false\n")
     _, settings = load_mission(path)
@@ -330,6 +346,9 @@ def test_the_maps_settings_in_a_mission_file_are_checked(tmp_path, capsys):
     path.write_text(base + "\n[mission]\ndense_candidates_m = 0.25\n")
     _, settings = load_mission(path)
     assert settings["map_aware"].dense_candidates_m == 0.25 and settings["map_aware"].dense_depth is True
+    path.write_text(base + "\n[mission]\nsurvey_without_dvl = false\n")
+    _, params = prepare_mission(path)
+    assert params.survey_without_dvl is False
 
 
 def test_perception_reviews_the_path_against_the_views_taken_on_its_map():

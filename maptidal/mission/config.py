@@ -20,6 +20,7 @@
     planner = "maptidal"   # where tasks come from: maptidal (discovered), voronoi or boustrophedon
     discovery = "map-aware"  # maptidal's discovery in the loop: map-aware (the robot's own map) or paper
     explore = true         # map-aware robots with no task fly to their map's frontier (false: they do not)
+    survey_without_dvl = true  # ... robots without a DVL too (false: only those with one survey)
     retire_taken = false   # map-aware robots retire tasks the team's views taken cover (true; off by default)
     explore_radius_m = 3.0 # ... within this of where each was launched (maptidal.exploration)
     inspect_region = "walls"  # what a map-aware team inspects: "walls" (the box of the evaluated walls)
@@ -85,6 +86,7 @@ MISSION_KEYS = {
     "planner",
     "discovery",
     "explore",
+    "survey_without_dvl",
     "explore_radius_m",
     "dense_depth",
     "dense_candidates_m",
@@ -102,6 +104,7 @@ SETTING_TYPES: dict[str, type] = {
     "perception_process": bool,
     "relocalise": bool,
     "explore": bool,
+    "survey_without_dvl": bool,
     "retire_taken": bool,
     "lost_stand_down": bool,
     "inspect_region": str,

@@ -66,6 +66,7 @@ EXPLORE_TESTS = [
     "tests/test_mission.py::test_the_box_a_team_is_sent_to_inspect",
     "tests/test_loop_discovery.py::test_each_keyframes_dense_depth_maps_the_walls_where_they_are",
     "tests/test_loop_discovery.py::test_an_idle_robot_surveys_its_best_look_waits_for_a_teammate_and_then_has_explored",
+    "tests/test_loop_discovery.py::test_with_survey_without_dvl_off_only_the_robots_with_a_dvl_survey",
 ]
 TIME_USE_TESTS = [
     "tests/test_time_use.py",
@@ -1726,6 +1727,16 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "maptidal/mission/outputs.py",
                 'for key, kind in (("surveying", "surveying"), ("lost", "lost"))',
                 'for key, kind in (("surveying", "surveying"), ("lost", "surveying"))',
+            )
+        ],
+    ),
+    "Y8": (
+        "a robot without a DVL surveys with survey_without_dvl off",
+        [
+            (
+                "maptidal/mission/run.py",
+                "        if not robot.has_dvl and not self.params.survey_without_dvl:",
+                "        if False:",
             )
         ],
     ),
