@@ -28,6 +28,8 @@ from maptidal.mission.batch import (
     parse_planners,
     parse_seeds,
     run_batch,
+    time_use_markdown,
+    time_use_means,
 )
 from maptidal.mission.config import DEFAULT_MISSION as MISSION_FILE
 
@@ -238,6 +240,31 @@ def test_each_planner_flies_each_seed_and_the_table_sets_them_side_by_side(tmp_p
     table = (tmp_path / "batch.md").read_text()
     assert "| metric | unit | voronoi | boustrophedon |" in table
     assert (tmp_path / "batch.png").stat().st_size > 0
+    # where each robot's time went, per planner and robot: the rows' own, a bar each
+    for row in rows:
+        document = json.loads((tmp_path / row["folder"] / "mission.json").read_text())
+        assert row["time_use"] == {name: use["seconds"] for name, use in document["time_use"].items()}
+        for robot in row["time_use"]:
+            assert f"| {row['planner']}, {robot} |" in table
+    assert (tmp_path / "time_use.png").stat().st_size > 0
+
+
+def test_the_time_use_means_are_per_planner_and_robot_with_a_missing_occupation_as_nought():
+    rows = [
+        {"planner": "a", "time_use": {"r0": {"first sweep": 20.0, "tasks": 10.0}, "r1": {"lost": 4.0}}},
+        {"planner": "a", "time_use": {"r0": {"first sweep": 22.0, "surveying": 6.0}, "r1": {"lost": 8.0}}},
+        {"planner": "b", "time_use": {"r0": {"tasks": 5.0}}},
+        {"planner": "b", "time_use": {}},  # a mission recorded before the time use: left out
+    ]
+    means = time_use_means(rows)
+    assert means == {
+        "a": {"r0": {"first sweep": 21.0, "surveying": 3.0, "tasks": 5.0}, "r1": {"lost": 6.0}},
+        "b": {"r0": {"tasks": 5.0}},
+    }
+    table = "\n".join(time_use_markdown(means))
+    assert "| planner, robot | first sweep | surveying | tasks | lost |" in table
+    assert "| a, r1 | 0 | 0 | 0 | 6 |" in table and "| b, r0 | 0 | 0 | 5 | 0 |" in table
+    assert time_use_markdown({}) == []
 
 
 def test_a_bad_mission_file_fails_before_any_run(tmp_path):

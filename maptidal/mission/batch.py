@@ -10,7 +10,8 @@ lands:
   deviation, minimum and maximum of every metric), ``batch.md`` (the same as a table), ``batch.png`` (a
   panel per metric, every seed a dot) and ``coverage_time.png`` (the walls' inspected share against
   time: the mean over seeds and a band of one standard deviation, each mission held at its last value
-  after it ends).
+  after it ends), and ``time_use.png`` with ``batch.md``'s last table (where each robot's time went:
+  the mean seconds of each occupation, per planner and robot).
 
 With several planners (``--planners maptidal,voronoi,boustrophedon`` or ``all``) every planner flies
 every seed, each in ``PLANNER/seed_NNN/``; the rows carry the planner, ``batch.json``'s summary is one
@@ -37,6 +38,7 @@ import numpy as np
 from maptidal.executors import run_jobs
 from maptidal.files import atomic_write_json, atomic_write_text, save_png
 from maptidal.mission.outputs import mission_metrics
+from maptidal.mission.time_use import OCCUPATION_COLOURS, OCCUPATIONS
 from maptidal.progress import ProgressBar
 
 # the per-mission metrics, in table order, with their units (``batch.md``, ``batch.png``)
@@ -149,6 +151,8 @@ def run_one(run: BatchRun) -> dict:
         "folder": name,
         **mission_metrics(document),
         "coverage_timeline": document.get("coverage_timeline", [[0.0, 0.0]]),
+        # where each robot's time went, seconds per occupation (maptidal.mission.time_use)
+        "time_use": {name: use["seconds"] for name, use in document.get("time_use", {}).items()},
     }
 
 
@@ -172,6 +176,70 @@ def aggregate(rows: list[dict]) -> dict:
     return summary
 
 
+def time_use_means(rows: list[dict]) -> dict[str, dict[str, dict[str, float]]]:
+    """Per planner and robot, the mean seconds of each occupation over the rows that carry a time use (an
+    occupation a mission never had counts as 0 s in it)."""
+    means: dict[str, dict[str, dict[str, float]]] = {}
+    for planner in dict.fromkeys(row.get("planner") for row in rows):
+        flown = [row["time_use"] for row in rows if row.get("planner") == planner and row.get("time_use")]
+        robots = list(dict.fromkeys(name for use in flown for name in use))
+        means[str(planner)] = {
+            robot: {
+                kind: float(np.mean([use.get(robot, {}).get(kind, 0.0) for use in flown]))
+                for kind in OCCUPATIONS
+                if any(kind in use.get(robot, {}) for use in flown)
+            }
+            for robot in robots
+        }
+    return means
+
+
+def time_use_markdown(means: dict[str, dict[str, dict[str, float]]]) -> list[str]:
+    """``batch.md``'s table of where each robot's time went: mean seconds per occupation, a row per
+    planner and robot; none without a time use."""
+    pairs = [(planner, robot, use) for planner, robots in means.items() for robot, use in robots.items()]
+    if not pairs:
+        return []
+    kinds = [k for k in OCCUPATIONS if any(k in use for _, _, use in pairs)]
+    lines = [
+        "## Where each robot's time went",
+        "",
+        "Mean simulated seconds per occupation over the seeds (maptidal/mission/time_use.py).",
+        "",
+        "| planner, robot | " + " | ".join(kinds) + " |",
+        "|---" * (len(kinds) + 1) + "|",
+    ]
+    for planner, robot, use in pairs:
+        lines.append(f"| {planner}, {robot} | " + " | ".join(f"{use.get(k, 0.0):.0f}" for k in kinds) + " |")
+    return [*lines, "", "![where each robot's time went](time_use.png)", ""]
+
+
+def plot_time_use(means: dict[str, dict[str, dict[str, float]]], path: Path) -> None:
+    """Where each robot's time went: a bar per planner and robot, its mean seconds stacked by occupation."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pairs = [
+        (f"{planner}, {robot}", use) for planner, robots in means.items() for robot, use in robots.items()
+    ]
+    figure, axis = plt.subplots(figsize=(8, 1.2 + 0.45 * max(len(pairs), 1)))
+    for kind in OCCUPATIONS:
+        widths = [use.get(kind, 0.0) for _, use in pairs]
+        if not any(widths):
+            continue
+        lefts = [sum(use.get(k, 0.0) for k in OCCUPATIONS[: OCCUPATIONS.index(kind)]) for _, use in pairs]
+        axis.barh(range(len(pairs)), widths, left=lefts, color=OCCUPATION_COLOURS[kind], label=kind)
+    axis.set_yticks(range(len(pairs)), [label for label, _ in pairs])
+    axis.invert_yaxis()
+    axis.set_xlabel("mean simulated seconds")
+    axis.set_title("Where each robot's time went")
+    axis.legend(fontsize=7, ncol=5, loc="upper center", bbox_to_anchor=(0.5, -0.35))
+    figure.tight_layout()
+    save_png(figure, path)
+
+
 def batch_csv(rows: list[dict]) -> str:
     """The rows as CSV text, a seed per line."""
     buffer = io.StringIO()
@@ -182,8 +250,9 @@ def batch_csv(rows: list[dict]) -> str:
     return buffer.getvalue()
 
 
-def batch_markdown(summary: dict, runs: int) -> str:
-    """The aggregate as a markdown table: metric, mean, spread, range."""
+def batch_markdown(summary: dict, runs: int, time_use: dict | None = None) -> str:
+    """The aggregate as a markdown table: metric, mean, spread, range; then where each robot's time went
+    (``time_use``, :func:`time_use_means`), when given."""
     lines = [
         f"# Map-TIDAL missions: {runs} seeds",
         "",
@@ -202,7 +271,7 @@ def batch_markdown(summary: dict, runs: int) -> str:
             f"| {figures['min']:.3g} | {figures['max']:.3g} |"
         )
     lines += ["", "![every seed](batch.png)", "", "![coverage against time](coverage_time.png)", ""]
-    return "\n".join(lines)
+    return "\n".join([*lines, *time_use_markdown(time_use or {})])
 
 
 def _of(figures: dict, runs: int) -> str:
@@ -211,8 +280,9 @@ def _of(figures: dict, runs: int) -> str:
     return "" if count == runs else f" ({count} of {runs})"
 
 
-def planners_markdown(summaries: dict[str, dict], runs: int) -> str:
-    """Several planners' aggregates side by side: each metric's mean +- std per planner."""
+def planners_markdown(summaries: dict[str, dict], runs: int, time_use: dict | None = None) -> str:
+    """Several planners' aggregates side by side: each metric's mean +- std per planner; then where each
+    robot's time went (``time_use``, :func:`time_use_means`), when given."""
     planners = list(summaries)
     lines = [
         f"# Planners flown in the loop: {', '.join(planners)}, {runs} seeds each",
@@ -242,7 +312,7 @@ def planners_markdown(summaries: dict[str, dict], runs: int) -> str:
         "![coverage against time, mean and one standard deviation](coverage_time.png)",
         "",
     ]
-    return "\n".join(lines)
+    return "\n".join([*lines, *time_use_markdown(time_use or {})])
 
 
 def plot_batch(rows: list[dict], path: Path) -> None:
@@ -385,14 +455,17 @@ def run_batch(
         atomic_write_text(out / "batch.csv", batch_csv([results[k] for k in sorted(results)]))
         bar.advance(note=f"seed {row['seed']}: {row['tasks_done']}/{row['tasks_found']} tasks done")
     rows = [results[k] for k in sorted(results)]
+    time_use = time_use_means(rows)
     if several:
         summary = {p: aggregate([row for row in rows if row["planner"] == p]) for p in planners}
-        markdown = planners_markdown(summary, len(seeds))
+        markdown = planners_markdown(summary, len(seeds), time_use)
     else:
         summary = aggregate(rows)
-        markdown = batch_markdown(summary, len(rows))
+        markdown = batch_markdown(summary, len(rows), time_use)
     atomic_write_json(out / "batch.json", {"executor": executor, "rows": rows, "summary": summary})
     atomic_write_text(out / "batch.md", markdown)
     plot_batch(rows, out / "batch.png")
     plot_coverage_bands(rows, out / "coverage_time.png")
+    if any(time_use.values()):
+        plot_time_use(time_use, out / "time_use.png")
     return rows, summary
