@@ -38,7 +38,7 @@ import numpy as np
 from maptidal.executors import run_jobs
 from maptidal.files import atomic_write_json, atomic_write_text, save_png
 from maptidal.mission.outputs import mission_metrics
-from maptidal.mission.time_use import OCCUPATION_COLOURS, OCCUPATIONS
+from maptidal.mission.time_use import OCCUPATION_COLOURS, OCCUPATIONS, occupation_table
 from maptidal.progress import ProgressBar
 
 # the per-mission metrics, in table order, with their units (``batch.md``, ``batch.png``)
@@ -197,21 +197,21 @@ def time_use_means(rows: list[dict]) -> dict[str, dict[str, dict[str, float]]]:
 def time_use_markdown(means: dict[str, dict[str, dict[str, float]]]) -> list[str]:
     """``batch.md``'s table of where each robot's time went: mean seconds per occupation, a row per
     planner and robot; none without a time use."""
-    pairs = [(planner, robot, use) for planner, robots in means.items() for robot, use in robots.items()]
-    if not pairs:
+    rows = [
+        (f"{planner}, {robot}", use) for planner, robots in means.items() for robot, use in robots.items()
+    ]
+    if not rows:
         return []
-    kinds = [k for k in OCCUPATIONS if any(k in use for _, _, use in pairs)]
-    lines = [
+    return [
         "## Where each robot's time went",
         "",
         "Mean simulated seconds per occupation over the seeds (maptidal/mission/time_use.py).",
         "",
-        "| planner, robot | " + " | ".join(kinds) + " |",
-        "|---" * (len(kinds) + 1) + "|",
+        *occupation_table("planner, robot", rows),
+        "",
+        "![where each robot's time went](time_use.png)",
+        "",
     ]
-    for planner, robot, use in pairs:
-        lines.append(f"| {planner}, {robot} | " + " | ".join(f"{use.get(k, 0.0):.0f}" for k in kinds) + " |")
-    return [*lines, "", "![where each robot's time went](time_use.png)", ""]
 
 
 def plot_time_use(means: dict[str, dict[str, dict[str, float]]], path: Path) -> None:
@@ -225,12 +225,12 @@ def plot_time_use(means: dict[str, dict[str, dict[str, float]]], path: Path) -> 
         (f"{planner}, {robot}", use) for planner, robots in means.items() for robot, use in robots.items()
     ]
     figure, axis = plt.subplots(figsize=(8, 1.2 + 0.45 * max(len(pairs), 1)))
+    lefts = np.zeros(len(pairs))  # each bar's end so far
     for kind in OCCUPATIONS:
-        widths = [use.get(kind, 0.0) for _, use in pairs]
-        if not any(widths):
-            continue
-        lefts = [sum(use.get(k, 0.0) for k in OCCUPATIONS[: OCCUPATIONS.index(kind)]) for _, use in pairs]
-        axis.barh(range(len(pairs)), widths, left=lefts, color=OCCUPATION_COLOURS[kind], label=kind)
+        widths = np.array([use.get(kind, 0.0) for _, use in pairs])
+        if widths.any():
+            axis.barh(range(len(pairs)), widths, left=lefts, color=OCCUPATION_COLOURS[kind], label=kind)
+            lefts += widths
     axis.set_yticks(range(len(pairs)), [label for label, _ in pairs])
     axis.invert_yaxis()
     axis.set_xlabel("mean simulated seconds")

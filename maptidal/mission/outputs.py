@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from maptidal.files import atomic_write_bytes, atomic_write_json, atomic_write_text, save_png
-from maptidal.mission.time_use import OCCUPATION_COLOURS, OCCUPATIONS
+from maptidal.mission.time_use import OCCUPATION_COLOURS, OCCUPATIONS, occupation_table
 
 EVENTS = "events.jsonl"
 TRAJECTORIES = "trajectories.csv"
@@ -460,8 +460,8 @@ def team_time_use(document: dict) -> dict:
     if not use:
         return {"surveying_s": None, "lost_s": None}
     return {
-        f"{key}_s": round(sum(row["seconds"].get(kind, 0.0) for row in use.values()), 3)
-        for key, kind in (("surveying", "surveying"), ("lost", "lost"))
+        f"{kind}_s": round(sum(row["seconds"].get(kind, 0.0) for row in use.values()), 3)
+        for kind in ("surveying", "lost")
     }
 
 
@@ -471,10 +471,7 @@ def time_use_lines(document: dict) -> list[str]:
     use = document.get("time_use")
     if not use:
         return []
-    kinds = [k for k in OCCUPATIONS if any(k in row["seconds"] for row in use.values())]
-    rows = ["| robot | " + " | ".join(kinds) + " |", "|---" * (len(kinds) + 1) + "|"]
-    for name, row in use.items():
-        rows.append(f"| {name} | " + " | ".join(f"{row['seconds'].get(k, 0.0):.0f}" for k in kinds) + " |")
+    rows = occupation_table("robot", [(name, row["seconds"]) for name, row in use.items()])
     return [
         "## Where each robot's time went",
         "",

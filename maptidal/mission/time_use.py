@@ -101,3 +101,13 @@ class TimeUse:
             "seconds": {k: round(self.seconds[k], 3) for k in OCCUPATIONS if k in self.seconds},
             "spans": [[round(a, 3), round(b, 3), kind] for a, b, kind in self.spans(now_s)],
         }
+
+
+def occupation_table(first_column: str, rows: list[tuple[str, dict[str, float]]]) -> list[str]:
+    """A markdown table of seconds per occupation: a row per ``(label, seconds)``, a column per occupation
+    any row has (in the order of OCCUPATIONS), whole seconds; an occupation a row lacks reads 0."""
+    kinds = [k for k in OCCUPATIONS if any(k in seconds for _, seconds in rows)]
+    lines = [f"| {first_column} | " + " | ".join(kinds) + " |", "|---" * (len(kinds) + 1) + "|"]
+    for label, seconds in rows:
+        lines.append(f"| {label} | " + " | ".join(f"{seconds.get(k, 0.0):.0f}" for k in kinds) + " |")
+    return lines

@@ -1725,8 +1725,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/mission/outputs.py",
-                'for key, kind in (("surveying", "surveying"), ("lost", "lost"))',
-                'for key, kind in (("surveying", "surveying"), ("lost", "surveying"))',
+                'f"{kind}_s": round(sum(row["seconds"].get(kind, 0.0) for row in use.values()), 3)',
+                'f"{kind}_s": round(sum(row["seconds"].get("surveying", 0.0) for row in use.values()), 3)',
             )
         ],
     ),
