@@ -145,6 +145,21 @@ def register(commands) -> None:
     add_output_folder(batch, "runs/batch")
     batch.set_defaults(handler=run_batch_command)
 
+    compare = commands.add_parser(
+        "compare-batches",
+        help="two batches of the same seeds side by side: which differences are more than the seeds' noise",
+        description="Pair two `maptidal batch` folders by planner and seed and give, for each metric (finish "
+        "time, walls uninspected, tasks, path, energy, contact, time surveying and lost, bytes), the "
+        "means, the mean difference AFTER - BEFORE with its 95 % confidence interval (Student's t on the "
+        "seeds' differences), and on how many seeds AFTER is lower and higher. A mission is chaotic, so "
+        "a difference whose interval holds 0 is the seeds' noise. Writes compare.md, compare.json and "
+        "compare.png (each seed a line from BEFORE to AFTER) to --out.",
+    )
+    compare.add_argument("before", metavar="BEFORE", help="a batch folder (batch.json or batch.csv)")
+    compare.add_argument("after", metavar="AFTER", help="another batch folder, of the same seeds")
+    add_output_folder(compare, "runs/compare")
+    compare.set_defaults(handler=run_compare_batches)
+
 
 def run_mission(args: argparse.Namespace) -> int:
     """Handler of ``maptidal run``."""
@@ -234,4 +249,14 @@ def run_batch_command(args: argparse.Namespace) -> int:
     several = planners is not None and len(planners) > 1
     print(planners_markdown(summary, len(seeds)) if several else batch_markdown(summary, len(rows)))
     print(f"files in {args.out}: batch.csv, batch.json, batch.md, batch.png, coverage_time.png, seed_NNN/")
+    return 0
+
+
+def run_compare_batches(args: argparse.Namespace) -> int:
+    """Handler of ``maptidal compare-batches``."""
+    from maptidal.mission.batch_compare import write_comparison
+
+    _, markdown = write_comparison(args.before, args.after, args.out)
+    print(markdown, end="")
+    print(f"files in {args.out}: compare.md, compare.json, compare.png")
     return 0

@@ -37,6 +37,7 @@ import numpy as np
 
 from maptidal.executors import run_jobs
 from maptidal.files import atomic_write_json, atomic_write_text, save_png
+from maptidal.mission.batch_compare import planners_pairs_markdown
 from maptidal.mission.outputs import mission_metrics
 from maptidal.mission.time_use import OCCUPATION_COLOURS, OCCUPATIONS, occupation_table
 from maptidal.progress import ProgressBar
@@ -280,9 +281,13 @@ def _of(figures: dict, runs: int) -> str:
     return "" if count == runs else f" ({count} of {runs})"
 
 
-def planners_markdown(summaries: dict[str, dict], runs: int, time_use: dict | None = None) -> str:
-    """Several planners' aggregates side by side: each metric's mean +- std per planner; then where each
-    robot's time went (``time_use``, :func:`time_use_means`), when given."""
+def planners_markdown(
+    summaries: dict[str, dict], runs: int, time_use: dict | None = None, rows: list[dict] | None = None
+) -> str:
+    """Several planners' aggregates side by side: each metric's mean +- std per planner; then, given the
+    ``rows``, each planner against Map-TIDAL seed by seed, with the mean difference's confidence interval
+    (:func:`maptidal.mission.batch_compare.planners_pairs_markdown`); then where each robot's time went
+    (``time_use``, :func:`time_use_means`), when given."""
     planners = list(summaries)
     lines = [
         f"# Planners flown in the loop: {', '.join(planners)}, {runs} seeds each",
@@ -312,7 +317,8 @@ def planners_markdown(summaries: dict[str, dict], runs: int, time_use: dict | No
         "![coverage against time, mean and one standard deviation](coverage_time.png)",
         "",
     ]
-    return "\n".join([*lines, *time_use_markdown(time_use or {})])
+    pairs = planners_pairs_markdown(rows) if rows else []
+    return "\n".join([*lines, *pairs, *time_use_markdown(time_use or {})])
 
 
 def plot_batch(rows: list[dict], path: Path) -> None:
@@ -458,7 +464,7 @@ def run_batch(
     time_use = time_use_means(rows)
     if several:
         summary = {p: aggregate([row for row in rows if row["planner"] == p]) for p in planners}
-        markdown = planners_markdown(summary, len(seeds), time_use)
+        markdown = planners_markdown(summary, len(seeds), time_use, rows)
     else:
         summary = aggregate(rows)
         markdown = batch_markdown(summary, len(rows), time_use)

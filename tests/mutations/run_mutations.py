@@ -78,6 +78,7 @@ STAND_DOWN_TESTS = [
     "tests/test_localisation_loop.py::test_a_robot_lost_for_good_is_not_waited_for_and_the_ending_says_so",
     "tests/test_localisation_loop.py::test_without_standing_down_a_lost_robot_keeps_its_task",
 ]
+COMPARE_TESTS = ["tests/test_batch_compare.py"]
 TESTS_OF_GROUP = {
     "M": TESTS,
     "F": FLIGHT_TESTS,
@@ -95,6 +96,7 @@ TESTS_OF_GROUP = {
     "Y": EXPLORE_TESTS,
     "Z": STAND_DOWN_TESTS,
     "U": TIME_USE_TESTS,
+    "C": COMPARE_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -1804,6 +1806,38 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "                if False:",
             )
         ],
+    ),
+    "C1": (
+        "the difference the other way round",
+        [("maptidal/mission/batch_compare.py", "    differences = a - b\n", "    differences = b - a\n")],
+    ),
+    "C2": (
+        "the population deviation in the interval",
+        [("maptidal/mission/batch_compare.py", "differences.std(ddof=1)", "differences.std()")],
+    ),
+    "C3": (
+        "a one-sided t quantile",
+        [
+            (
+                "maptidal/mission/batch_compare.py",
+                "stats.t.ppf(0.5 + CONFIDENCE / 2, len",
+                "stats.t.ppf(CONFIDENCE, len",
+            )
+        ],
+    ),
+    "C4": (
+        "seeds paired that one batch lacks",
+        [
+            (
+                "maptidal/mission/batch_compare.py",
+                "seeds = tuple(sorted(set(before) & set(after)))",
+                "seeds = tuple(sorted(set(before) | set(after)))",
+            )
+        ],
+    ),
+    "C5": (
+        "a tie counted as lower",
+        [("maptidal/mission/batch_compare.py", "return sum(a < b for a, b", "return sum(a <= b for a, b")],
     ),
 }
 
