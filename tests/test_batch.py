@@ -239,6 +239,8 @@ def test_each_planner_flies_each_seed_and_the_table_sets_them_side_by_side(tmp_p
         assert summary[row["planner"]]["tasks_found"]["mean"] == row["tasks_found"]
     table = (tmp_path / "batch.md").read_text()
     assert "| metric | unit | voronoi | boustrophedon |" in table
+    # ... and the second against the first, seed by seed (one seed: no interval)
+    assert "## Each planner against voronoi, seed by seed" in table and "### boustrophedon" in table
     assert (tmp_path / "batch.png").stat().st_size > 0
     # where each robot's time went, per planner and robot: the rows' own, a bar each
     for row in rows:

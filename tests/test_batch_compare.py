@@ -169,4 +169,8 @@ def test_each_planner_is_set_against_map_tidal_seed_by_seed_in_one_batch():
     text = "\n".join(lines)
     assert "### boustrophedon" in text and "### voronoi" in text and "too few seeds" in text
     assert "| finish time (s) | 298 | 134 |" in text
-    assert planners_pairs_markdown([row for row in rows if row["planner"] != "maptidal"]) == []
+    assert planners_pairs_markdown([row for row in rows if row["planner"] == "maptidal"]) == []
+    assert planners_pairs_markdown(rows, reference="greedy") == []
+    # without Map-TIDAL, each planner against the first
+    others = "\n".join(planners_pairs_markdown([row for row in rows if row["planner"] != "maptidal"]))
+    assert "against boustrophedon" in others and "### voronoi" in others and "### boustrophedon" not in others

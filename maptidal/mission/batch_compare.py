@@ -286,10 +286,13 @@ def between_planners(rows: list[dict], first: str, second: str) -> list[PairedDi
     return [dataclasses.replace(d, planner=f"{second} - {first}") for d in found if d is not None]
 
 
-def planners_pairs_markdown(rows: list[dict], reference: str = "maptidal") -> list[str]:
-    """Markdown lines for ``batch.md`` with several planners: every other planner against ``reference``,
-    paired by seed (:func:`between_planners`); none without the reference or another planner."""
+def planners_pairs_markdown(rows: list[dict], reference: str | None = None) -> list[str]:
+    """Markdown lines for ``batch.md`` with several planners: every other planner against ``reference``
+    (by default Map-TIDAL where it flew, else the first planner), paired by seed
+    (:func:`between_planners`); none with a single planner or without the reference."""
     planners = list(dict.fromkeys(row["planner"] for row in rows))
+    if reference is None:
+        reference = "maptidal" if "maptidal" in planners else planners[0] if planners else ""
     if reference not in planners or len(planners) < 2:
         return []
     lines = [f"## Each planner against {reference}, seed by seed", "", _explained(reference, "the planner")]
