@@ -136,6 +136,8 @@ def test_bad_batches_are_one_line(tmp_path):
     (tmp_path / "ours" / "batch.csv").write_text(batch_csv([_row(1)]))
     (tmp_path / "broken").mkdir()
     (tmp_path / "broken" / "batch.json").write_text("{not json")
+    (tmp_path / "twice").mkdir()
+    (tmp_path / "twice" / "batch.csv").write_text(batch_csv([_row(1), _row(2), _row(1)]))
     (tmp_path / "none").mkdir()
     (tmp_path / "none" / "batch.csv").write_text(batch_csv([]))
     out = tmp_path / "cmp"
@@ -145,6 +147,7 @@ def test_bad_batches_are_one_line(tmp_path):
         (tmp_path / "broken", tmp_path / "ours", "not a batch's batch.json"),
         (tmp_path / "none", tmp_path / "ours", "no mission in it"),
         (tmp_path / "other", tmp_path / "ours", "nothing to pair"),
+        (tmp_path / "ours", tmp_path / "twice", "seed 1 of maptidal is there twice"),
     ):
         assert_one_line_error(maptidal_here("compare-batches", before, after, "--out", out), message)
 

@@ -128,7 +128,8 @@ def _number(text: str) -> float | None:
 def read_batch(folder: str | Path) -> list[dict]:
     """The rows of the batch in ``folder``: ``batch.json``'s, or ``batch.csv``'s with its numbers parsed.
     A row without a planner (a batch of one planner before planners were recorded) counts as
-    ``maptidal``. Raises ValueError, in one line, for a folder with neither file or with no row."""
+    ``maptidal``. Raises ValueError, in one line, for a folder with neither file, with no row, or with a
+    planner's seed twice."""
     folder = Path(folder)
     if not folder.is_dir():
         raise ValueError(f"{folder}: no such batch folder")
@@ -151,11 +152,15 @@ def read_batch(folder: str | Path) -> list[dict]:
         raise ValueError(f"{folder}: neither batch.json nor batch.csv (is it a `maptidal batch` folder?)")
     if not isinstance(rows, list) or not rows:
         raise ValueError(f"{folder}: the batch has no mission in it")
+    seen = set()
     for row in rows:
         if not isinstance(row, dict) or _number(row.get("seed")) is None:
             raise ValueError(f"{folder}: a row without a seed")
         row["seed"] = int(_number(row["seed"]))
         row["planner"] = row.get("planner") or "maptidal"
+        if (row["planner"], row["seed"]) in seen:  # two missions of one seed: which to pair is unknown
+            raise ValueError(f"{folder}: seed {row['seed']} of {row['planner']} is there twice")
+        seen.add((row["planner"], row["seed"]))
     return rows
 
 
