@@ -247,7 +247,9 @@ def run_batch_command(args: argparse.Namespace) -> int:
         explore=False if args.no_explore else None,
     )
     several = planners is not None and len(planners) > 1
-    print(planners_markdown(summary, len(seeds)) if several else batch_markdown(summary, len(rows)))
+    print(
+        planners_markdown(summary, len(seeds), rows=rows) if several else batch_markdown(summary, len(rows))
+    )
     print(f"files in {args.out}: batch.csv, batch.json, batch.md, batch.png, coverage_time.png, seed_NNN/")
     return 0
 

@@ -15,8 +15,9 @@ lands:
 
 With several planners (``--planners maptidal,voronoi,boustrophedon`` or ``all``) every planner flies
 every seed, each in ``PLANNER/seed_NNN/``; the rows carry the planner, ``batch.json``'s summary is one
-aggregate per planner, ``batch.md`` tabulates their means side by side and ``batch.png`` draws each
-planner's seeds in its own colour.
+aggregate per planner, ``batch.md`` tabulates their means side by side, then each planner against
+Map-TIDAL seed by seed (:mod:`maptidal.mission.batch_compare`), and ``batch.png`` draws each planner's
+seeds in its own colour.
 
 A mission is a function of its scenario, its settings and its seed alone, so the metrics do not depend on
 the executor, except the wall-clock ones (``realtime_factor``, ``wall_time_s``), which are reported but

@@ -41,6 +41,7 @@ __all__ = [
     "planners_pairs_markdown",
     "plot_comparison",
     "read_batch",
+    "write_comparison",
 ]
 
 # the metrics compared, in table order, with their short names for the table and the plot
