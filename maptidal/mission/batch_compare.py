@@ -19,7 +19,6 @@ that was stopped before it ended, ``batch.csv``. Pure numpy and scipy: no simula
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 import math
 from dataclasses import dataclass
@@ -66,19 +65,36 @@ CONFIDENCE = 0.95
 @dataclass(frozen=True)
 class PairedDifference:
     """One metric of one planner in two batches, over the seeds both flew (and both have the metric for):
-    the values ``before`` and ``after`` seed by seed, their means, the mean difference ``after - before``
-    and its confidence interval (``low``, ``high``; None with fewer than two seeds)."""
+    the values ``before`` and ``after`` seed by seed, and the confidence interval (``low``, ``high``; None
+    with fewer than two seeds) of their mean difference ``after - before``."""
 
     metric: str
     planner: str
     seeds: tuple[int, ...]
     before: tuple[float, ...]
     after: tuple[float, ...]
-    mean_before: float
-    mean_after: float
-    mean_difference: float
     low: float | None
     high: float | None
+
+    @property
+    def mean_before(self) -> float:
+        """The first batch's mean over the paired seeds."""
+        return float(np.mean(self.before))
+
+    @property
+    def mean_after(self) -> float:
+        """The second batch's mean over the paired seeds."""
+        return float(np.mean(self.after))
+
+    @property
+    def mean_difference(self) -> float:
+        """The mean of the seeds' differences ``after - before``."""
+        return float(np.mean(np.subtract(self.after, self.before)))
+
+    @property
+    def interval(self) -> str:
+        """The interval as the tables and plots print it, `` [low, high]``, or nothing without one."""
+        return "" if self.low is None else f" [{_figure(self.low)}, {_figure(self.high)}]"
 
     @property
     def lower_in(self) -> int:
@@ -178,11 +194,17 @@ def _values(rows: list[dict], metric: str, planner: str) -> dict[int, float]:
 
 
 def paired_difference(
-    before_rows: list[dict], after_rows: list[dict], metric: str, planner: str
+    before_rows: list[dict],
+    after_rows: list[dict],
+    metric: str,
+    planner: str,
+    after_planner: str | None = None,
 ) -> PairedDifference | None:
     """``metric`` of ``planner`` paired by seed across two batches' rows (module docstring), or None when
-    no seed has it in both."""
-    before, after = _values(before_rows, metric, planner), _values(after_rows, metric, planner)
+    no seed has it in both. With ``after_planner``, the second rows' planner is that one (two planners of
+    one batch, :func:`between_planners`), and the difference is labelled ``after_planner - planner``."""
+    second = planner if after_planner is None else after_planner
+    before, after = _values(before_rows, metric, planner), _values(after_rows, metric, second)
     seeds = tuple(sorted(set(before) & set(after)))
     if not seeds:
         return None
@@ -198,39 +220,21 @@ def paired_difference(
             / math.sqrt(len(seeds))
         )
         low, high = mean - half, mean + half
-    return PairedDifference(
-        metric,
-        planner,
-        seeds,
-        tuple(b.tolist()),
-        tuple(a.tolist()),
-        float(b.mean()),
-        float(a.mean()),
-        mean,
-        low,
-        high,
-    )
+    label = planner if after_planner is None else f"{after_planner} - {planner}"
+    return PairedDifference(metric, label, seeds, tuple(b.tolist()), tuple(a.tolist()), low, high)
 
 
 def compare_batches(before_rows: list[dict], after_rows: list[dict]) -> list[PairedDifference]:
     """Every compared metric (``COMPARED``) of every planner both batches flew, paired by seed. Raises
-    ValueError when the batches share no planner and seed."""
-    planners = [
-        p
-        for p in dict.fromkeys(row["planner"] for row in before_rows)
-        if any(r["planner"] == p for r in after_rows)
+    ValueError when nothing pairs (no planner and seed in common)."""
+    found = [
+        paired_difference(before_rows, after_rows, metric, planner)
+        for planner in dict.fromkeys(row["planner"] for row in before_rows)
+        for metric in COMPARED
     ]
-    shared = {(r["planner"], r["seed"]) for r in before_rows} & {
-        (r["planner"], r["seed"]) for r in after_rows
-    }
-    if not shared:
+    found = [difference for difference in found if difference is not None]
+    if not found:
         raise ValueError("the two batches have no planner and seed in common: nothing to pair")
-    found = []
-    for planner in planners:
-        for metric in COMPARED:
-            difference = paired_difference(before_rows, after_rows, metric, planner)
-            if difference is not None:
-                found.append(difference)
     return found
 
 
@@ -250,7 +254,6 @@ def difference_table(differences: list[PairedDifference], before_name: str, afte
         "|---|---|---|---|---|---|",
     ]
     for d in differences:
-        interval = "" if d.low is None else f" [{_figure(d.low)}, {_figure(d.high)}]"
         if d.within_noise is None:
             verdict = "too few seeds"
         elif d.within_noise:
@@ -259,7 +262,7 @@ def difference_table(differences: list[PairedDifference], before_name: str, afte
             verdict = "lower" if d.high < 0 else "higher"
         lines.append(
             f"| {COMPARED[d.metric]} | {_figure(d.mean_before)} | {_figure(d.mean_after)} | "
-            f"{_figure(d.mean_difference)}{interval} | "
+            f"{_figure(d.mean_difference)}{d.interval} | "
             f"{d.lower_in} / {d.higher_in} of {len(d.seeds)} | {verdict} |"
         )
     return lines
@@ -286,10 +289,8 @@ def comparison_markdown(differences: list[PairedDifference], before_name: str, a
 def between_planners(rows: list[dict], first: str, second: str) -> list[PairedDifference]:
     """Planner ``second`` against planner ``first`` in one batch's rows, paired by seed (each planner
     flew the same seeds), every compared metric: the differences are ``second - first``."""
-    mine = [{**row, "planner": "pair"} for row in rows if row["planner"] == first]
-    theirs = [{**row, "planner": "pair"} for row in rows if row["planner"] == second]
-    found = [paired_difference(mine, theirs, metric, "pair") for metric in COMPARED]
-    return [dataclasses.replace(d, planner=f"{second} - {first}") for d in found if d is not None]
+    found = [paired_difference(rows, rows, metric, first, second) for metric in COMPARED]
+    return [difference for difference in found if difference is not None]
 
 
 def planners_pairs_markdown(rows: list[dict], reference: str | None = None) -> list[str]:
@@ -343,9 +344,8 @@ def plot_comparison(
                 colour = "tab:green" if a < b else "tab:red" if a > b else "grey"
                 axis.plot([0, 1], [b, a], "-o", color=colour, alpha=0.5, ms=3, lw=1)
             axis.plot([0, 1], [d.mean_before, d.mean_after], "-s", color="black", lw=2, ms=5)
-            interval = "" if d.low is None else f" [{_figure(d.low)}, {_figure(d.high)}]"
             axis.set_title(
-                f"{COMPARED[metric]}\n{planner}: {_figure(d.mean_difference)}{interval}", fontsize=8
+                f"{COMPARED[metric]}\n{planner}: {_figure(d.mean_difference)}{d.interval}", fontsize=8
             )
             axis.set_xticks([0, 1], [before_name, after_name], fontsize=8)
             axis.set_xlim(-0.3, 1.3)
