@@ -323,6 +323,11 @@ class BatchedDeadReckoning:
             np.asarray(v, float) for v in (model.inertia, model.linear_damping, model.quadratic_damping)
         )
         self._net_buoyancy_n = model.net_buoyancy_n
+        self._thrust_lag_s = model.thrust_lag_s
+        # each row's commanded force through the thrusters' lag, and whether its last period ran on the
+        # model (DeadReckoning.thrust_lagged, modelled_last)
+        self.thrust_lagged = np.zeros((n, 3))
+        self.modelled_last = np.ones(n, bool)
 
     def load(self, row: int, estimator: DeadReckoning) -> None:
         """Take row ``row``'s state from one robot's :class:`DeadReckoning`."""
@@ -337,6 +342,8 @@ class BatchedDeadReckoning:
             estimator._velocity_world,
         )
         self.time_s[row] = s.time_s
+        self.thrust_lagged[row] = estimator.thrust_lagged
+        self.modelled_last[row] = estimator.modelled_last
 
     def update(
         self,
@@ -360,13 +367,22 @@ class BatchedDeadReckoning:
                 raise ValueError("a DVL reading is invalid: the motion model needs the thrust force")
             # the motion model (MotionModel.step) where the DVL has no lock
             up_body = rotations_from_quaternions(self.quaternion)[:, 2]
-            force = thrust_force + self._net_buoyancy_n * up_body
+            force = thrust_force
+            if self._thrust_lag_s > 0.0:
+                settled = self.thrust_lagged + (1.0 - math.exp(-dt / self._thrust_lag_s)) * (
+                    force - self.thrust_lagged
+                )
+                lagged = np.where(self.modelled_last[:, None], settled, force)
+                self.thrust_lagged = np.where(dvl_valid[:, None], self.thrust_lagged, lagged)
+                force = lagged
+            force = force + self._net_buoyancy_n * up_body
             momentum = self._mass * previous_velocity
             force = force - cross_rows(gyro, momentum)
             damping = self._linear + self._quadratic * np.abs(previous_velocity)
             modelled = (momentum + dt * force) / (self._mass + dt * damping)
             velocity = np.where(dvl_valid[:, None], velocity, modelled)
         self.velocity_body, self.angular_velocity_body = velocity, gyro
+        self.modelled_last = ~dvl_valid
         self.quaternion = rotate_quaternions(self.quaternion, gyro * dt)
         rotation = rotations_from_quaternions(self.quaternion)
         body_acceleration = (velocity - previous_velocity) / dt + cross_rows(gyro, velocity)

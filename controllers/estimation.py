@@ -5,7 +5,8 @@ sensors and on a real vehicle's telemetry. Frames: world x north (towards the OS
 west (left), z up; body x forward, y left, z up. The input is a plain dict of readings, as
 ``maptidal.envs.simulation.Simulation.sensors`` returns and as a MAVLink bridge can fill from telemetry:
 
-    {"imu": {"accel": [ax, ay, az], "gyro": [p, q, r]},       # m/s^2 specific force, rad/s, body
+    {"imu": {"accel": [ax, ay, az], "gyro": [p, q, r],        # m/s^2 specific force, rad/s, body
+             "accel_mean": [ax, ay, az]},                       # optional: the period's mean specific force
      "depth": {"depth_m": d},                                   # m below the surface
      "dvl": {"velocity_body": [u, v, w] or None, "valid": bool},# m/s over ground, body
      "compass": {"heading_deg": h},                             # deg clockwise from north
@@ -115,13 +116,18 @@ class MotionModel:
     C_RB + C_A for a diagonal mass, -w x ((m + m_A) v), is added: a turning vehicle's momentum keeps its
     direction in the world while the body turns under it. Leaving it out made the model-aided step of a
     robot turning 10 deg/s at 0.25 m/s 1 to 2 cm/s off along its surge axis (session 17,
-    ``tests/bench/diag_localisation.py``). The thrusters' lag is left out. The velocity is through the
-    water: a current drifts the estimate by its own speed."""
+    ``tests/bench/diag_localisation.py``). The thrusters' first-order lag behind their commands,
+    ``thrust_lag_s``, is the estimator's to apply (:class:`DeadReckoning` filters the commanded force
+    with it before :meth:`step`): without it the model's acceleration leads the vehicle's by the lag at
+    every change of command, by 0.1 to 0.3 m/s^2 over half a second in a mission's flight, and by
+    0.02 to 0.06 m/s^2 with it (CHANGELOG, session 36). The velocity is through the water: a current
+    drifts the estimate by its own speed."""
 
     inertia: tuple[float, float, float]  # kg, M_RB + M_A along each body axis
     linear_damping: tuple[float, float, float]  # N s / m
     quadratic_damping: tuple[float, float, float]  # N s^2 / m^2
     net_buoyancy_n: float = 0.0  # buoyancy minus weight
+    thrust_lag_s: float = 0.0  # the thrusters' first-order lag behind their commands (s); 0: none
 
     def step(
         self,
@@ -155,6 +161,7 @@ class MotionModel:
             linear_damping=tuple(less * v for v in self.linear_damping),
             quadratic_damping=tuple(less * v for v in self.quadratic_damping),
             net_buoyancy_n=less * self.net_buoyancy_n,
+            thrust_lag_s=self.thrust_lag_s,
         )
 
     @functools.cached_property
@@ -236,7 +243,8 @@ class DeadReckoning:
     - **z** comes from the depth sensor, through its lever arm.
     - **x and y** integrate the body velocity rotated into the world frame. The velocity is the DVL's;
       without a valid DVL reading it comes from ``params.motion_model`` and the ``thrust`` reading where
-      both are there, and is otherwise held at its last value.
+      both are there (the commanded force through the thrusters' lag, ``MotionModel.thrust_lag_s``),
+      and is otherwise held at its last value.
     """
 
     def __init__(self, params: EstimatorParams, start_position, start_yaw: float = 0.0) -> None:
@@ -246,6 +254,10 @@ class DeadReckoning:
         self.quaternion = quaternion_from_rpy(0.0, 0.0, start_yaw)
         self._velocity_world = np.zeros(3)
         self._depth_sensor_position = np.asarray(params.depth_sensor_position, float)
+        # the commanded force through the thrusters' lag (MotionModel.thrust_lag_s), from rest, and
+        # whether the last period ran on the model (after a DVL period the force is taken as settled)
+        self.thrust_lagged = np.zeros(3)
+        self.modelled_last = True
 
     def set_attitude(self, roll: float, pitch: float, yaw: float) -> None:
         """Restart the attitude estimate at ``roll``, ``pitch``, ``yaw`` (rad, z-y-x)."""
@@ -268,9 +280,18 @@ class DeadReckoning:
             s.velocity_body = np.asarray(dvl["velocity_body"], float) - cross3(gyro, self.params.dvl_position)
         elif modelled:
             up_body = rotation[2]  # the world vertical in body axes: R's last row
-            s.velocity_body = self.params.motion_model.step(
-                s.velocity_body, thrust["force_body"], up_body, dt, gyro
-            )
+            force = np.asarray(thrust["force_body"], float)
+            lag = self.params.motion_model.thrust_lag_s
+            if lag > 0.0:
+                if self.modelled_last:
+                    self.thrust_lagged = self.thrust_lagged + (1.0 - math.exp(-dt / lag)) * (
+                        force - self.thrust_lagged
+                    )
+                else:
+                    self.thrust_lagged = force.copy()
+                force = self.thrust_lagged
+            s.velocity_body = self.params.motion_model.step(s.velocity_body, force, up_body, dt, gyro)
+        self.modelled_last = modelled
         if imu is not None:
             s.angular_velocity_body = gyro
             # predict: the gyro's turn over the period; then correct, against readings taken at its end

@@ -63,6 +63,8 @@ class VehicleModel:
     # the thrusters' static curve through ArduSub's PWM mapping; None: thrust proportional to command
     thrust_curve: ThrustCurve | None = None
     pwm_range: PwmRange = field(default_factory=PwmRange)
+    # the thrusters' first-order lag (s) behind their commands; 0: none
+    thrust_lag_s: float = 0.0
 
     def thruster_forces(self, commands) -> np.ndarray:
         """Thrust (N) of each mixed thruster command in [-1, 1]."""
@@ -84,6 +86,7 @@ class VehicleModel:
             linear_damping=tuple(self.linear_damping[:3]),
             quadratic_damping=tuple(self.quadratic_damping[:3]),
             net_buoyancy_n=self.net_buoyancy_n,
+            thrust_lag_s=self.thrust_lag_s,
         )
 
     @property

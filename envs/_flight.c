@@ -25,7 +25,7 @@
 /* ----- layout ----------------------------------------------------------------------------------- */
 #define PARAM_FIELDS(X)                                                                                 \
   X(HAS_AUTOPILOT, 1) X(HAS_ESTIMATOR, 1) X(MODE, 1) X(N_THR, 1) X(CTRL_ADR, 1) X(ACT_ADR, 1)           \
-  X(QPOS_ADR, 1) X(BODY_ID, 1)                                                                          \
+  X(QPOS_ADR, 1) X(DOF_ADR, 1) X(BODY_ID, 1)                                                             \
   X(EN_IMU, 1) X(EN_DEPTH, 1) X(EN_DVL, 1) X(EN_COMPASS, 1)                                             \
   X(ADR_ACCEL, 1) X(ADR_GYRO, 1) X(ADR_MAG, 1) X(ADR_VELOCIMETER, 1) X(ADR_DEPTH_POS, 1) X(ADR_BEAM, 4) \
   X(ACCEL_SIGMA, 1) X(ACCEL_WALK, 1) X(GYRO_SIGMA, 1) X(GYRO_WALK, 1) X(DEPTH_SIGMA, 1)                 \
@@ -35,6 +35,7 @@
   X(LINEARISE, 1) X(LIN_CURVE, 5) X(LIN_PWM, 2)                                                         \
   X(SURFACE_Z, 1) X(DEPTH_SENSOR_POS, 3) X(DVL_POS, 3) X(TILT_K, 1) X(HEADING_K, 1)                     \
   X(HAS_MOTION_MODEL, 1) X(MM_INERTIA, 3) X(MM_LINEAR, 3) X(MM_QUADRATIC, 3) X(MM_BUOYANCY, 1)          \
+  X(MM_LAG, 1)                                                                \
   X(BF_LINEAR, 1) X(BF_CURVE, 5) X(BF_PWM, 2) X(BF_MATRIX, 3 * MAX_THR)                                 \
   X(MAX_LEAN_DEG, 1) X(MAX_YAW_RATE_DEG_S, 1) X(RP_DZ, 1) X(YAW_DZ, 1) X(THR_DZ, 1) X(TRANS_DZ, 1)      \
   X(RATE_RP, 7) X(RATE_YAW, 7) X(POS_GAINS, 16) X(FC_SURFACE_Z, 1)
@@ -45,8 +46,10 @@
   X(DZ_VEL_ERROR, 1) X(XY_INTEGRAL, 2) X(XY_LAST_ERROR, 2) X(XY_LAST_SET, 1) X(HOLD_XY, 2)              \
   X(HOLD_SET, 1)                                                                                        \
   X(QUAT, 4) X(POSITION, 3) X(RPY, 3) X(VELOCITY, 3) X(RATES, 3) X(EST_TIME, 1) X(ACCEL_WORLD, 3)       \
-  X(VELOCITY_WORLD, 3) X(ACCEL_BIAS, 3) X(GYRO_BIAS, 3)                                                 \
-  X(R_ACCEL, 3) X(R_GYRO, 3) X(R_DEPTH, 1) X(R_PRESSURE, 1) X(R_DVL_VELOCITY, 3) X(R_BEAMS, 4)          \
+  X(VELOCITY_WORLD, 3) X(THRUST_LAGGED, 3) X(MODELLED_LAST, 1) X(ACCEL_BIAS, 3) X(GYRO_BIAS, 3)                                    \
+  X(ACCEL_MEAN, 3) X(ACCEL_MEAN_SET, 1)                                                                 \
+  X(R_ACCEL, 3) X(R_GYRO, 3) X(R_ACCEL_MEAN, 3) X(R_DEPTH, 1) X(R_PRESSURE, 1) X(R_DVL_VELOCITY, 3)     \
+  X(R_BEAMS, 4)                                                                                         \
   X(R_DVL_VALID, 1) X(R_HEADING, 1) X(R_FIELD, 3) X(R_THRUST, 3) X(R_THRUST_SET, 1)                     \
   X(OUTPUTS, MAX_THR) X(OUTPUTS_SET, 1) X(PATH, 1) X(ENERGY, 1) X(CONTACT_S, 1) X(VERTEX, 3)            \
   X(VERTEX_SET, 1)
@@ -454,6 +457,11 @@ static int read_sensors(const double* p, double* s, const mjData* d, const doubl
     for (int k = 0; k < 3; k++) S(R_ACCEL)[k] = (sd[a + k] + S(ACCEL_BIAS)[k]) + (0.0 + *P(ACCEL_SIGMA) * z[used + k]);
     used += 3;
     for (int k = 0; k < 3; k++) S(R_GYRO)[k] = (sd[g + k] + S(GYRO_BIAS)[k]) + (0.0 + *P(GYRO_SIGMA) * z[used + k]);
+    /* the period's mean specific force, with the accelerometer's bias and its noise draw (RobotSensors.read) */
+    const double* mean = *S(ACCEL_MEAN_SET) != 0.0 ? S(ACCEL_MEAN) : sd + a;
+    for (int k = 0; k < 3; k++) {
+      S(R_ACCEL_MEAN)[k] = (mean[k] + S(ACCEL_BIAS)[k]) + (0.0 + *P(ACCEL_SIGMA) * z[used - 3 + k]);
+    }
     used += 3;
   }
   if (*P(EN_DEPTH) != 0.0) {
@@ -520,7 +528,18 @@ static void estimator_update(const double* p, double* s, double dt) {
   } else if (modelled) {
     double up[3] = {R[6], R[7], R[8]}, force[3], momentum[3], turn[3], v[3];
     for (int k = 0; k < 3; k++) v[k] = S(VELOCITY)[k];
-    for (int k = 0; k < 3; k++) force[k] = S(R_THRUST)[k] + *P(MM_BUOYANCY) * up[k];
+    double* lagged = S(THRUST_LAGGED);
+    double lag = *P(MM_LAG);
+    for (int k = 0; k < 3; k++) force[k] = S(R_THRUST)[k];
+    if (lag > 0.0) {
+      if (*S(MODELLED_LAST) != 0.0) {
+        for (int k = 0; k < 3; k++) lagged[k] = lagged[k] + (1.0 - exp(-dt / lag)) * (force[k] - lagged[k]);
+      } else {
+        for (int k = 0; k < 3; k++) lagged[k] = force[k];
+      }
+      for (int k = 0; k < 3; k++) force[k] = lagged[k];
+    }
+    for (int k = 0; k < 3; k++) force[k] = force[k] + *P(MM_BUOYANCY) * up[k];
     for (int k = 0; k < 3; k++) momentum[k] = P(MM_INERTIA)[k] * v[k];
     cross3(gyro, momentum, turn);
     for (int k = 0; k < 3; k++) force[k] = force[k] - turn[k];
@@ -529,6 +548,7 @@ static void estimator_update(const double* p, double* s, double dt) {
                        (P(MM_INERTIA)[k] + dt * (P(MM_LINEAR)[k] + P(MM_QUADRATIC)[k] * fabs(v[k])));
     }
   }
+  *S(MODELLED_LAST) = modelled;
   if (imu) {
     for (int k = 0; k < 3; k++) S(RATES)[k] = gyro[k];
     double turn[3] = {gyro[0] * dt, gyro[1] * dt, gyro[2] * dt};
@@ -668,12 +688,27 @@ int maptidal_flight_periods(const mjModel* m, mjData* d, const double* params, d
       }
       drive(p, s, d, thrusters);
     }
+    for (int r = 0; r < n_robots; r++) {  /* each body's velocity at the period's start */
+      const double* p = params + r * pn;
+      double* s = state + r * sn;
+      for (int k = 0; k < 3; k++) S(ACCEL_MEAN)[k] = d->qvel[(int)*P(DOF_ADR) + k];
+    }
     int bad_before = bad_state_warnings(d);
     struct timespec start, stop;
     clock_gettime(CLOCK_MONOTONIC, &start);
     step_physics((mjModel*)m, d, substeps);
     clock_gettime(CLOCK_MONOTONIC, &stop);
     *wall += (stop.tv_sec - start.tv_sec) + 1e-9 * (stop.tv_nsec - start.tv_nsec);
+    for (int r = 0; r < n_robots; r++) {  /* Simulation._period_specific_force */
+      const double* p = params + r * pn;
+      double* s = state + r * sn;
+      const mjtNum* v = d->qvel + (int)*P(DOF_ADR);
+      const mjtNum* xmat = d->xmat + 9 * (int)*P(BODY_ID);
+      double w[3];
+      for (int k = 0; k < 3; k++) w[k] = (v[k] - S(ACCEL_MEAN)[k]) / period_s - m->opt.gravity[k];
+      for (int j = 0; j < 3; j++) S(ACCEL_MEAN)[j] = xmat[j] * w[0] + xmat[3 + j] * w[1] + xmat[6 + j] * w[2];
+      *S(ACCEL_MEAN_SET) = 1.0;
+    }
     for (int r = 0; r < n_robots; r++) {
       const double* p = params + r * pn;
       double* s = state + r * sn;

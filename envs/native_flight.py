@@ -141,8 +141,10 @@ STATE_ORDER = (
     *(("DZ_CLIMB", 1), ("DZ_LIMIT", 1), ("DZ_VEL_ERROR", 1), ("XY_INTEGRAL", 2), ("XY_LAST_ERROR", 2)),
     *(("XY_LAST_SET", 1), ("HOLD_XY", 2), ("HOLD_SET", 1)),
     *(("QUAT", 4), ("POSITION", 3), ("RPY", 3), ("VELOCITY", 3), ("RATES", 3), ("EST_TIME", 1)),
-    *(("ACCEL_WORLD", 3), ("VELOCITY_WORLD", 3), ("ACCEL_BIAS", 3), ("GYRO_BIAS", 3)),
-    *(("R_ACCEL", 3), ("R_GYRO", 3), ("R_DEPTH", 1), ("R_PRESSURE", 1), ("R_DVL_VELOCITY", 3)),
+    *(("ACCEL_WORLD", 3), ("VELOCITY_WORLD", 3), ("THRUST_LAGGED", 3), ("MODELLED_LAST", 1)),
+    *(("ACCEL_BIAS", 3), ("GYRO_BIAS", 3), ("ACCEL_MEAN", 3), ("ACCEL_MEAN_SET", 1)),
+    *(("R_ACCEL", 3), ("R_GYRO", 3), ("R_ACCEL_MEAN", 3), ("R_DEPTH", 1), ("R_PRESSURE", 1)),
+    *(("R_DVL_VELOCITY", 3),),
     *(("R_BEAMS", 4), ("R_DVL_VALID", 1), ("R_HEADING", 1), ("R_FIELD", 3), ("R_THRUST", 3)),
     *(("R_THRUST_SET", 1), ("OUTPUTS", MAX_THRUSTERS), ("OUTPUTS_SET", 1), ("PATH", 1), ("ENERGY", 1)),
     *(("CONTACT_S", 1), ("VERTEX", 3), ("VERTEX_SET", 1)),
@@ -243,6 +245,7 @@ def _estimator_params(params) -> dict[str, object]:
             MM_LINEAR=model.linear_damping,
             MM_QUADRATIC=model.quadratic_damping,
             MM_BUOYANCY=model.net_buoyancy_n,
+            MM_LAG=model.thrust_lag_s,
         )
     return values
 
@@ -405,6 +408,7 @@ class NativeFlight:
             "CTRL_ADR": sim._ctrl_adr[robot],
             "ACT_ADR": slot.act_adr,
             "QPOS_ADR": sim._position_adr[robot],
+            "DOF_ADR": slot.dof_adr,
             "BODY_ID": slot.body_id,
             "EN_IMU": "imu" in sensors.enabled,
             "EN_DEPTH": "depth" in sensors.enabled,
@@ -479,11 +483,15 @@ class NativeFlight:
             values.append(e.time_s)
             values += e.acceleration_world.tolist()
             values += estimator._velocity_world.tolist()
+            values += estimator.thrust_lagged.tolist()
+            values.append(estimator.modelled_last)
         else:
             values += _ZEROS[: self._estimate_size]
         sensors = sim._sensors[robot]
         values += sensors.accel_bias.tolist()
         values += sensors.gyro_bias.tolist()
+        mean = sensors.mean_specific_force
+        values += (0.0, 0.0, 0.0, False) if mean is None else (*mean.tolist(), True)
         values += _ZEROS[: self._readings_size]
         outputs = sim._thruster_outputs.get(robot)
         if outputs is None:
@@ -543,11 +551,15 @@ class NativeFlight:
             e.time_s = v[j + 16]
             e.acceleration_world = row[j + 17 : j + 20].copy()
             estimator._velocity_world = row[j + 20 : j + 23].copy()
+            estimator.thrust_lagged = row[j + 23 : j + 26].copy()
+            estimator.modelled_last = v[j + 26] != 0.0
             sim._readings[robot] = self._readings(robot, v)
         sensors = sim._sensors[robot]
         j = o["ACCEL_BIAS"]
         sensors.accel_bias[:] = row[j : j + 3]
         sensors.gyro_bias[:] = row[j + 3 : j + 6]
+        j = o["ACCEL_MEAN"]
+        sensors.mean_specific_force = row[j : j + 3].copy() if v[o["ACCEL_MEAN_SET"]] else None
         if v[o["OUTPUTS_SET"]]:
             j = o["OUTPUTS"]
             sim._thruster_outputs[robot] = row[j : j + sim._specs[robot].vehicle.n_thrusters].copy()
@@ -573,6 +585,7 @@ class NativeFlight:
         if "imu" in readings:
             put("R_ACCEL", readings["imu"]["accel"])
             put("R_GYRO", readings["imu"]["gyro"])
+            put("R_ACCEL_MEAN", readings["imu"]["accel_mean"])
         if "depth" in readings:
             put("R_DEPTH", readings["depth"]["depth_m"])
             put("R_PRESSURE", readings["depth"]["pressure_pa"])
@@ -598,7 +611,7 @@ class NativeFlight:
         out: dict = {}
         if "imu" in enabled:
             j = o["R_ACCEL"]
-            out["imu"] = {"accel": v[j : j + 3], "gyro": v[j + 3 : j + 6]}
+            out["imu"] = {"accel": v[j : j + 3], "gyro": v[j + 3 : j + 6], "accel_mean": v[j + 6 : j + 9]}
         if "depth" in enabled:
             out["depth"] = {"depth_m": v[o["R_DEPTH"]], "pressure_pa": v[o["R_PRESSURE"]]}
         if "dvl" in enabled:

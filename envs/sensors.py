@@ -71,11 +71,15 @@ class RobotSensors:
             self._slices[name] = slice(sensor.adr[0], sensor.adr[0] + sensor.dim[0])
         self.accel_bias = np.zeros(3)
         self.gyro_bias = np.zeros(3)
+        # the specific force (m/s^2, body) averaged over the last control period, as the simulation
+        # measures it from the body's velocity change (Simulation.advance_physics); None: not flown yet
+        self.mean_specific_force: np.ndarray | None = None
 
     def reset(self, rng: np.random.Generator) -> None:
         """Draw fresh IMU biases (one bias-walk step's worth of spread)."""
         self.accel_bias = rng.normal(0.0, self.noise.accel_bias_walk, 3)
         self.gyro_bias = rng.normal(0.0, self.noise.gyro_bias_walk, 3)
+        self.mean_specific_force = None
 
     def advance(self, dt: float, rng: np.random.Generator) -> None:
         """Let the IMU biases random-walk over ``dt`` seconds."""
@@ -89,9 +93,15 @@ class RobotSensors:
         n = self.noise
         out: dict = {}
         if "imu" in self.enabled:
+            accel_noise = rng.normal(0, n.accel_sigma, 3)
+            mean = raw["accelerometer"] if self.mean_specific_force is None else self.mean_specific_force
             out["imu"] = {
-                "accel": (raw["accelerometer"] + self.accel_bias + rng.normal(0, n.accel_sigma, 3)).tolist(),
+                "accel": (raw["accelerometer"] + self.accel_bias + accel_noise).tolist(),
                 "gyro": (raw["gyro"] + self.gyro_bias + rng.normal(0, n.gyro_sigma, 3)).tolist(),
+                # the last control period's mean (its velocity change over its length, as a real IMU's
+                # delta velocity gives it: ArduPilot's estimators read AP_InertialSensor's
+                # get_delta_velocity), with the same bias and noise draw as the sample
+                "accel_mean": (mean + self.accel_bias + accel_noise).tolist(),
             }
         if "depth" in self.enabled:
             depth = self.water_depth - float(raw["depth_pos"][2]) + rng.normal(0, n.depth_sigma)

@@ -39,7 +39,12 @@ import numpy as np
 
 from maptidal.camera import StereoCameraParams
 from maptidal.controllers.convention import pilot_command
-from maptidal.controllers.estimation import DeadReckoning, EstimatorParams, StateEstimate, rpy_from_rotation
+from maptidal.controllers.estimation import (
+    DeadReckoning,
+    EstimatorParams,
+    StateEstimate,
+    rpy_from_rotation,
+)
 from maptidal.controllers.flight_modes import FLIGHT_MODES, FlightController, ModeParams
 from maptidal.controllers.mixing import MixerParams, mix
 from maptidal.controllers.pose import VehicleModel
@@ -394,6 +399,7 @@ class Simulation:
         self.data.qpos[qpos + 3 : qpos + 7] = attitude
         self._odometry[robot].last_vertex = None  # a teleport is no travel: the path restarts here
         self.data.qvel[slot.dof_adr : slot.dof_adr + 6] = 0.0
+        self._sensors[robot].mean_specific_force = None  # no period flown from here yet
         n = self._specs[robot].vehicle.n_thrusters
         self.data.act[slot.act_adr : slot.act_adr + n] = 0.0
         self.data.ctrl[self._ctrl_adr[robot] : self._ctrl_adr[robot] + n] = 0.0
@@ -713,9 +719,14 @@ class Simulation:
         Raises :class:`SimulationError` if the state becomes NaN or diverges."""
         bad_before = self._instability_warnings()
         time_before = self.time  # MuJoCo restarts a diverged state at t = 0: say when it went
+        velocities = {
+            robot: self.data.qvel[slot.dof_adr : slot.dof_adr + 3].tolist()
+            for robot, slot in self._slots.items()
+        }
         start = time.perf_counter()
         step_physics(self.model, self.data, n_steps)
         self.wall_time_s += time.perf_counter() - start
+        self._period_specific_force(velocities, n_steps * self.scenario.timestep_s)
         self._count_odometry(n_steps * self.scenario.timestep_s)
         for sensors in self._sensors.values():
             sensors.advance(n_steps * self.scenario.timestep_s, self.rng)
@@ -723,6 +734,20 @@ class Simulation:
         if diverged or not (np.isfinite(self.data.qpos).all() and np.isfinite(self.data.qvel).all()):
             raise self._diverged(n_steps, time_before)
         return self.time
+
+    def _period_specific_force(self, velocities: dict[str, list[float]], seconds: float) -> None:
+        """Each robot's specific force (m/s^2, body axes at the end) averaged over the ``seconds`` just
+        stepped, from its velocity change: what an IMU's delta velocity over the period gives, however
+        short an impact within it (:attr:`RobotSensors.mean_specific_force`). Written out axis by axis,
+        as the compiled flight stack computes it."""
+        g = self.model.opt.gravity.tolist()
+        for robot, slot in self._slots.items():
+            v = self.data.qvel[slot.dof_adr : slot.dof_adr + 3].tolist()
+            x = self.data.xmat[slot.body_id].tolist()
+            w = [(v[k] - velocities[robot][k]) / seconds - g[k] for k in range(3)]
+            self._sensors[robot].mean_specific_force = np.array(
+                [x[j] * w[0] + x[3 + j] * w[1] + x[6 + j] * w[2] for j in range(3)]
+            )
 
     def _diverged(self, n_steps: int, time_before: float) -> SimulationError:
         """The error for a state that went bad in the ``n_steps`` physics steps after ``time_before``."""

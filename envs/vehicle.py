@@ -195,6 +195,7 @@ class VehicleParams:
             pwm_range=self.thruster.pwm_range,
             ardusub_frame=self.ardusub_frame,
             net_buoyancy_n=self.buoyancy_n - self.weight_n,
+            thrust_lag_s=self.thruster.time_constant_s,
         )
 
 

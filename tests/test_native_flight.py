@@ -37,8 +37,10 @@ def record(sim: Simulation, per_period: np.ndarray) -> np.ndarray:
         e = estimator.state
         values += [estimator.quaternion, e.position, e.rpy, e.velocity_body, e.angular_velocity_body]
         values += [e.acceleration_world, [e.time_s], estimator._velocity_world]
+        values += [estimator.thrust_lagged, [estimator.modelled_last]]
         readings = sim.latest_readings(robot)
         values += [readings["imu"]["accel"], readings["imu"]["gyro"], [readings["depth"]["depth_m"]]]
+        values += [readings["imu"]["accel_mean"]]
         values += [
             [readings["compass"]["heading_deg"]],
             readings.get("thrust", {}).get("force_body", [0, 0, 0]),

@@ -79,6 +79,11 @@ STAND_DOWN_TESTS = [
     "tests/test_localisation_loop.py::test_without_standing_down_a_lost_robot_keeps_its_task",
 ]
 COMPARE_TESTS = ["tests/test_batch_compare.py"]
+LAG_TESTS = [
+    "tests/test_imu_mean_and_thrust_lag.py",
+    "tests/test_native_flight.py",
+    "tests/test_batched.py",
+]
 TESTS_OF_GROUP = {
     "M": TESTS,
     "F": FLIGHT_TESTS,
@@ -97,6 +102,7 @@ TESTS_OF_GROUP = {
     "Z": STAND_DOWN_TESTS,
     "U": TIME_USE_TESTS,
     "C": COMPARE_TESTS,
+    "K": LAG_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -1838,6 +1844,32 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
     "C5": (
         "a tie counted as lower",
         [("maptidal/mission/batch_compare.py", "return sum(a < b for a, b", "return sum(a <= b for a, b")],
+    ),
+    "K1": (
+        "the estimator's thrust lag a fixed half step",
+        [("controllers/estimation.py", "(1.0 - math.exp(-dt / lag))", "(0.5)")],
+    ),
+    "K2": (
+        "the compiled estimator's thrust lag a fixed half step",
+        [("envs/_flight.c", "(1.0 - exp(-dt / lag))", "(0.5)")],
+    ),
+    "K3": (
+        "the batched estimator's thrust lag a fixed half step",
+        [("controllers/batched.py", "(1.0 - math.exp(-dt / self._thrust_lag_s))", "(0.5)")],
+    ),
+    "K4": (
+        "gravity left in the compiled period mean",
+        [("envs/_flight.c", "/ period_s - m->opt.gravity[k];", "/ period_s;")],
+    ),
+    "K5": (
+        "the period mean in world axes, not body axes",
+        [
+            (
+                "envs/simulation.py",
+                "[x[j] * w[0] + x[3 + j] * w[1] + x[6 + j] * w[2] for j in range(3)]",
+                "[w[0], w[1], w[2]]",
+            )
+        ],
     ),
 }
 
