@@ -25,7 +25,7 @@
 /* ----- layout ----------------------------------------------------------------------------------- */
 #define PARAM_FIELDS(X)                                                                                 \
   X(HAS_AUTOPILOT, 1) X(HAS_ESTIMATOR, 1) X(MODE, 1) X(N_THR, 1) X(CTRL_ADR, 1) X(ACT_ADR, 1)           \
-  X(QPOS_ADR, 1) X(DOF_ADR, 1) X(BODY_ID, 1)                                                             \
+  X(QPOS_ADR, 1) X(DOF_ADR, 1) X(BODY_ID, 1)                                                            \
   X(EN_IMU, 1) X(EN_DEPTH, 1) X(EN_DVL, 1) X(EN_COMPASS, 1)                                             \
   X(ADR_ACCEL, 1) X(ADR_GYRO, 1) X(ADR_MAG, 1) X(ADR_VELOCIMETER, 1) X(ADR_DEPTH_POS, 1) X(ADR_BEAM, 4) \
   X(ACCEL_SIGMA, 1) X(ACCEL_WALK, 1) X(GYRO_SIGMA, 1) X(GYRO_WALK, 1) X(DEPTH_SIGMA, 1)                 \
@@ -35,7 +35,7 @@
   X(LINEARISE, 1) X(LIN_CURVE, 5) X(LIN_PWM, 2)                                                         \
   X(SURFACE_Z, 1) X(DEPTH_SENSOR_POS, 3) X(DVL_POS, 3) X(TILT_K, 1) X(HEADING_K, 1)                     \
   X(HAS_MOTION_MODEL, 1) X(MM_INERTIA, 3) X(MM_LINEAR, 3) X(MM_QUADRATIC, 3) X(MM_BUOYANCY, 1)          \
-  X(MM_LAG, 1)                                                                \
+  X(MM_LAG, 1)                                                                                          \
   X(BF_LINEAR, 1) X(BF_CURVE, 5) X(BF_PWM, 2) X(BF_MATRIX, 3 * MAX_THR)                                 \
   X(MAX_LEAN_DEG, 1) X(MAX_YAW_RATE_DEG_S, 1) X(RP_DZ, 1) X(YAW_DZ, 1) X(THR_DZ, 1) X(TRANS_DZ, 1)      \
   X(RATE_RP, 7) X(RATE_YAW, 7) X(POS_GAINS, 16) X(FC_SURFACE_Z, 1)
@@ -46,7 +46,7 @@
   X(DZ_VEL_ERROR, 1) X(XY_INTEGRAL, 2) X(XY_LAST_ERROR, 2) X(XY_LAST_SET, 1) X(HOLD_XY, 2)              \
   X(HOLD_SET, 1)                                                                                        \
   X(QUAT, 4) X(POSITION, 3) X(RPY, 3) X(VELOCITY, 3) X(RATES, 3) X(EST_TIME, 1) X(ACCEL_WORLD, 3)       \
-  X(VELOCITY_WORLD, 3) X(THRUST_LAGGED, 3) X(MODELLED_LAST, 1) X(ACCEL_BIAS, 3) X(GYRO_BIAS, 3)                                    \
+  X(VELOCITY_WORLD, 3) X(THRUST_LAGGED, 3) X(MODELLED_LAST, 1) X(ACCEL_BIAS, 3) X(GYRO_BIAS, 3)         \
   X(ACCEL_MEAN, 3) X(ACCEL_MEAN_SET, 1)                                                                 \
   X(R_ACCEL, 3) X(R_GYRO, 3) X(R_ACCEL_MEAN, 3) X(R_DEPTH, 1) X(R_PRESSURE, 1) X(R_DVL_VELOCITY, 3)     \
   X(R_BEAMS, 4)                                                                                         \
@@ -688,7 +688,8 @@ int maptidal_flight_periods(const mjModel* m, mjData* d, const double* params, d
       }
       drive(p, s, d, thrusters);
     }
-    for (int r = 0; r < n_robots; r++) {  /* each body's velocity at the period's start */
+    /* each body's velocity at the period's start, held in ACCEL_MEAN until the mean replaces it */
+    for (int r = 0; r < n_robots; r++) {
       const double* p = params + r * pn;
       double* s = state + r * sn;
       for (int k = 0; k < 3; k++) S(ACCEL_MEAN)[k] = d->qvel[(int)*P(DOF_ADR) + k];

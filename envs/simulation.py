@@ -39,12 +39,7 @@ import numpy as np
 
 from maptidal.camera import StereoCameraParams
 from maptidal.controllers.convention import pilot_command
-from maptidal.controllers.estimation import (
-    DeadReckoning,
-    EstimatorParams,
-    StateEstimate,
-    rpy_from_rotation,
-)
+from maptidal.controllers.estimation import DeadReckoning, EstimatorParams, StateEstimate, rpy_from_rotation
 from maptidal.controllers.flight_modes import FLIGHT_MODES, FlightController, ModeParams
 from maptidal.controllers.mixing import MixerParams, mix
 from maptidal.controllers.pose import VehicleModel
