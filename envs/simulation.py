@@ -39,7 +39,13 @@ import numpy as np
 
 from maptidal.camera import StereoCameraParams
 from maptidal.controllers.convention import pilot_command
-from maptidal.controllers.estimation import DeadReckoning, EstimatorParams, StateEstimate, rpy_from_rotation
+from maptidal.controllers.estimation import (
+    DeadReckoning,
+    EstimatorParams,
+    MotionModel,
+    StateEstimate,
+    rpy_from_rotation,
+)
 from maptidal.controllers.flight_modes import FLIGHT_MODES, FlightController, ModeParams
 from maptidal.controllers.mixing import MixerParams, mix
 from maptidal.controllers.pose import VehicleModel
@@ -566,6 +572,13 @@ class Simulation:
         if self._check(robot) not in self._estimators:
             raise ValueError(f"{robot} keeps no estimate in MANUAL: call track_estimate({robot!r}) first")
         return self._estimators[robot].state
+
+    def motion_model(self, robot: str) -> MotionModel | None:
+        """The motion model ``robot``'s estimator dead-reckons on without a DVL (the vehicle's, put off by
+        ``motion_model_error``): what the robot believes of its own dynamics."""
+        if self._check(robot) not in self._estimators:
+            raise ValueError(f"{robot} keeps no estimate in MANUAL: call track_estimate({robot!r}) first")
+        return self._estimators[robot].params.motion_model
 
     def latest_readings(self, robot: str) -> dict:
         """The sensor readings :meth:`estimate` last folded in (as :meth:`sensors` returns them)."""

@@ -11,6 +11,8 @@
     clearance_m = 1.0      # how far a robot keeps from lower-indexed teammates (0: not at all)
     lost_after_s = 3.0     # a robot without a DVL is lost after this long without a visual fix ...
     lost_sigma_m = 0.15    # ... or when more unsure of its position than this
+    watch_pushes = false   # true: the accelerometer against the motion model grows the uncertainty of a
+                           # robot pushed or blocked (false, the default: it grows with time alone)
     lost_give_up = 0       # a robot lost this many times on its way to one view gives it up (0: never)
     lost_stand_down = true # a robot still lost after flying home and sweeping there releases its tasks
                            # and holds where it is until it has a fix (false: it keeps them)
@@ -78,6 +80,7 @@ MISSION_KEYS = {
     "clearance_m",
     "lost_after_s",
     "lost_sigma_m",
+    "watch_pushes",
     "lost_give_up",
     "lost_stand_down",
     "render_samples",
@@ -107,6 +110,7 @@ SETTING_TYPES: dict[str, type] = {
     "survey_without_dvl": bool,
     "retire_taken": bool,
     "lost_stand_down": bool,
+    "watch_pushes": bool,
     "inspect_region": str,
     "inspect_box": list,
     "dense_depth": bool,

@@ -62,6 +62,9 @@ class FrameJob:
     # how long since the robot's last frame its dead reckoning ran without its DVL
     # (maptidal.perception.odometry: until its next fix it is then as unsure as a robot without one)
     dvl_out_s: float = 0.0
+    # how far the robot may have moved since its last frame that its motion model did not say (pushed,
+    # or blocked; maptidal.perception.unmodelled): its front end grows its uncertainty by as much
+    unmodelled_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -114,7 +117,9 @@ def perceive(
     (:func:`maptidal.map_discovery.discover_on_map`), after folding the keyframe into that map; and, when
     the job asks, the robot's next looks on that map (:func:`maptidal.exploration.explore_views`)."""
     start = time.perf_counter()
-    record, keyframe = front.process(0, job.time_s, job.left, job.right, job.pose, unaided_s=job.dvl_out_s)
+    record, keyframe = front.process(
+        0, job.time_s, job.left, job.right, job.pose, unaided_s=job.dvl_out_s, unmodelled_m=job.unmodelled_m
+    )
     correction, sigma = None, None
     if front.pose_source == "vo":
         correction = (record.pose.position - job.dead_reckoned.position)[:2]

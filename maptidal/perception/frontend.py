@@ -172,9 +172,11 @@ class FrontEnd:
         right: np.ndarray,
         pose: CameraPose,
         unaided_s: float = 0.0,
+        unmodelled_m: float = 0.0,
     ) -> tuple[FrameRecord, KeyframeOutput | None]:
-        """One frame; ``pose`` is the source's pose (for ``vo``, the dead-reckoned one it corrects), and
-        ``unaided_s`` how long since the last frame the dead reckoning ran without its DVL
+        """One frame; ``pose`` is the source's pose (for ``vo``, the dead-reckoned one it corrects),
+        ``unaided_s`` how long since the last frame the dead reckoning ran without its DVL, and
+        ``unmodelled_m`` how far it may have moved since then that its motion model did not say
         (:meth:`maptidal.perception.odometry.VisualOdometry.update`)."""
         k = self.intrinsics
         clock = self._stage_s
@@ -198,7 +200,7 @@ class FrontEnd:
                 motion = relative_motion(previous, pixels[common], k.matrix, self.params.odometry)
                 inliers = 0 if motion is None else motion[2]
             dt = time_s - self._last_time_s if self._last_time_s is not None else 0.0
-            pose = self.odometry.update(pose, motion, dt, unaided_s)
+            pose = self.odometry.update(pose, motion, dt, unaided_s, unmodelled_m)
             # with a DVL too: over 1200 s of the default mission, seeds 0 to 2, the DVL robot was 1.7 to 3.0
             # cm off (median) with relocalisation and 2.4 to 9.4 cm on its DVL alone (session 15)
             if self.params.relocalisation.enabled:

@@ -32,6 +32,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -150,13 +151,17 @@ class VisualOdometry:
         motion: tuple[np.ndarray, np.ndarray, int] | None,
         dt_s: float = 0.0,
         unaided_s: float = 0.0,
+        unmodelled_m: float = 0.0,
     ) -> CameraPose:
         """The fused pose after one frame, from this frame's dead-reckoned pose and the visual motion
         (:func:`relative_motion`, None when PnP failed; a step longer than ``max_step_m``, or one the gate
         refuses, is dropped as a wrong solution), ``dt_s`` after the last frame (the horizontal variance
         grows by ``drift_m2_s dt_s``), of which the dead reckoning ran ``unaided_s`` without its DVL (a
-        robot with one is then as unsure as one without until its next fix). The first frame starts at
-        the dead reckoning."""
+        robot with one is then as unsure as one without until its next fix), and in which it may have
+        moved ``unmodelled_m`` that its motion model did not say (pushed or blocked:
+        :class:`maptidal.perception.unmodelled.UnmodelledMotion`), which adds to the standard deviation
+        outright: a push is one displacement, not a random walk. The first frame starts at the dead
+        reckoning."""
         if self.params.has_dvl and unaided_s > 0.0:
             self.unaided = True
         if self.pose is None or self._last_dr is None:
@@ -165,6 +170,8 @@ class VisualOdometry:
         base = self.params.drift_m2_s_dvl if self.dvl_aided else self.params.drift_m2_s_no_dvl
         drift = base * self.drift_scale
         self.sigma_m = float(np.sqrt(self.sigma_m**2 + drift * max(dt_s, 0.0)))
+        if math.isfinite(unmodelled_m) and unmodelled_m > 0.0:
+            self.sigma_m += unmodelled_m
         dr_step = dead_reckoning.position - self._last_dr.position
         step = dr_step
         if motion is not None:

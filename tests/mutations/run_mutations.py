@@ -84,6 +84,7 @@ LAG_TESTS = [
     "tests/test_native_flight.py",
     "tests/test_batched.py",
 ]
+PUSH_TESTS = ["tests/test_unmodelled_motion.py"]
 TESTS_OF_GROUP = {
     "M": TESTS,
     "F": FLIGHT_TESTS,
@@ -103,6 +104,7 @@ TESTS_OF_GROUP = {
     "U": TIME_USE_TESTS,
     "C": COMPARE_TESTS,
     "K": LAG_TESTS,
+    "A": PUSH_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -1868,6 +1870,92 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "envs/simulation.py",
                 "[x[j] * w[0] + x[3 + j] * w[1] + x[6 + j] * w[2] for j in range(3)]",
                 "[w[0], w[1], w[2]]",
+            )
+        ],
+    ),
+    "A1": (
+        "the world's vertical in body axes with the roll's sign flipped",
+        [
+            (
+                "maptidal/perception/unmodelled.py",
+                "math.sin(roll) * math.cos(pitch), math",
+                "-math.sin(roll) * math.cos(pitch), math",
+            )
+        ],
+    ),
+    "A2": (
+        "the turn's w x v left out of the model's sway acceleration",
+        [
+            (
+                "maptidal/perception/unmodelled.py",
+                "(vy - previous[1]) / dt + wz * vx - wx * vz,",
+                "(vy - previous[1]) / dt,",
+            )
+        ],
+    ),
+    "A3": (
+        "no glide after a push",
+        [
+            (
+                "maptidal/perception/unmodelled.py",
+                "self.coasting, self.elapsed_s = p.inertia is not None and settled, 0.0",
+                "self.coasting, self.elapsed_s = False, 0.0",
+            )
+        ],
+    ),
+    "A4": (
+        "the front end's uncertainty not grown by the unmodelled distance",
+        [("maptidal/perception/odometry.py", "self.sigma_m += unmodelled_m", "self.sigma_m += 0.0")],
+    ),
+    "A5": (
+        "the mission hands the front end no unmodelled distance",
+        [("maptidal/mission/run.py", "unmodelled_m=robot.unmodelled.take(),", "unmodelled_m=0.0,")],
+    ),
+    "A6": (
+        "a DVL's periods taken as the model's",
+        [("maptidal/mission/run.py", 'modelled = dvl is None or not dvl["valid"]', "modelled = True")],
+    ),
+    "A7": (
+        "the accelerometer's offset never learned",
+        [("maptidal/perception/unmodelled.py", "learn = min(dt / p.offset_s, 1.0)", "learn = 0.0")],
+    ),
+    "A8": (
+        "a push's start forgets the velocity it gave while the filter rose",
+        [
+            (
+                "maptidal/perception/unmodelled.py",
+                "self.velocity[i] + recent[i] - dt * difference[i]",
+                "self.velocity[i]",
+            )
+        ],
+    ),
+    "A9": (
+        "the watch on the estimator's vertical (no gyro-held vertical of its own)",
+        [
+            (
+                "maptidal/perception/unmodelled.py",
+                "up = self._vertical(gyro_body, up_in_body(roll, pitch), dt)",
+                "up = up_in_body(roll, pitch)",
+            )
+        ],
+    ),
+    "A10": (
+        "the gyro's bias never learned",
+        [
+            (
+                "maptidal/perception/unmodelled.py",
+                "integral = 0.25 * proportional * proportional",
+                "integral = 0.0",
+            )
+        ],
+    ),
+    "A11": (
+        "the glide's slowing taken for a new push",
+        [
+            (
+                "maptidal/perception/unmodelled.py",
+                "difference = [difference[i] - glide[i] for i in range(3)]",
+                "difference = difference",
             )
         ],
     ),
