@@ -261,7 +261,8 @@ class UnmodelledMotion:
         settled = self.elapsed_s >= p.settle_s and size < p.end_m_s2 and horizontal < drifted
         if settled or self.elapsed_s >= p.max_s:
             self.pushing = False
-            self.filtered = [0.0, 0.0, 0.0]
+            # the filter and the recent integral start again from nothing: what they hold is this push's
+            self.filtered, self._recent = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
             self.coasting, self.elapsed_s = p.inertia is not None and settled, 0.0
             if not self.coasting:
                 self.velocity = [0.0, 0.0, 0.0]
