@@ -166,8 +166,8 @@ class MissionParams:
     # wall that stops a robot while its model flies on, grows the front end's uncertainty by as far as
     # the robot may have moved unseen, so that it counts as lost and is found again. Off by default: on
     # the default tank (seeds 0-9) it changed neither the finish nor the walls uninspected beyond the
-    # seeds' noise, and the robots touched more (49 robot-seconds against 9, in 7 missions of 10;
-    # README, "Without a DVL")
+    # seeds' noise, and the robots touched more (21 robot-seconds against 9; it over-counts in long
+    # contact: README, "Without a DVL")
     watch_pushes: bool = False
     # a robot lost this many times on its way to one view gives the view up (a "gave_up" event), so
     # that a teammate that can hold its position there wins it: once may be a turn to open water on the
