@@ -340,6 +340,8 @@ def test_a_shoved_robot_is_told_at_its_next_frame(tmp_path, watching):
         else:
             assert grown <= by_time + 1e-9
         assert mission.robots["rov0"].unmodelled.take() == 0.0
+        # its DVL measured every period's velocity: no period was the model's, nothing was learned
+        assert mission.robots["rov0"].unmodelled.offset == [0.0, 0.0, 0.0]
     pushed = [e for e in read_events(tmp_path) if e["kind"] == "pushed"]
     assert [e["robot"] for e in pushed] == (["rov1"] if watching else [])
     if watching:
