@@ -569,16 +569,18 @@ class Simulation:
         """``robot``'s dead-reckoned state from its own sensors, as of the end of the last control period
         (:class:`maptidal.controllers.estimation.DeadReckoning`): what its flight mode flies on. Robots in
         MANUAL have one after :meth:`track_estimate`."""
+        return self._estimator(robot).state
+
+    def _estimator(self, robot: str) -> DeadReckoning:
+        """``robot``'s estimator; a robot in MANUAL keeps none until :meth:`track_estimate`."""
         if self._check(robot) not in self._estimators:
             raise ValueError(f"{robot} keeps no estimate in MANUAL: call track_estimate({robot!r}) first")
-        return self._estimators[robot].state
+        return self._estimators[robot]
 
     def motion_model(self, robot: str) -> MotionModel | None:
         """The motion model ``robot``'s estimator dead-reckons on without a DVL (the vehicle's, put off by
         ``motion_model_error``): what the robot believes of its own dynamics."""
-        if self._check(robot) not in self._estimators:
-            raise ValueError(f"{robot} keeps no estimate in MANUAL: call track_estimate({robot!r}) first")
-        return self._estimators[robot].params.motion_model
+        return self._estimator(robot).params.motion_model
 
     def latest_readings(self, robot: str) -> dict:
         """The sensor readings :meth:`estimate` last folded in (as :meth:`sensors` returns them)."""

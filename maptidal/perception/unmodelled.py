@@ -62,7 +62,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-STANDARD_GRAVITY = 9.81  # m/s^2, as the accelerometer's gravity is taken out
+from maptidal.controllers.estimation import STANDARD_GRAVITY
 
 
 @dataclass(frozen=True)
