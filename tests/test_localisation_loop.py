@@ -174,6 +174,109 @@ def test_by_default_a_robot_lost_on_its_way_flies_on_to_the_view(tmp_path):
     assert not [e for e in read_events(tmp_path) if e["kind"] == "gave_up"]
 
 
+def _idle_teammate_heard(mission: Mission, now: float, idle: bool = True) -> float:
+    """rov0 explored, with nothing to do (or busy, ``idle`` False), says so over the channel until rov1
+    has heard it; returns the time it was heard."""
+    teammate = mission.auction.agents[mission.robots["rov0"].index]
+    listener = mission.auction.agents[mission.robots["rov1"].index]
+    teammate.idle = idle
+    teammate.last_change_s = now  # news: it transmits in its next slot
+    for step in range(1, 60):
+        mission.auction.advance_to(now + step)
+        if listener.peer_idle.get(teammate.index) is idle and teammate.index in listener.peer_positions:
+            return now + step
+    raise AssertionError("rov1 never heard rov0")
+
+
+def _hand_over_cost_s(mission: Mission, robot, teammate_index: int) -> float:
+    """What handing ``robot``'s view over costs, worked out here from the channel's slot and the
+    teammate's heard position: a TDMA cycle (one slot per robot), then the flight at the routes' speed."""
+    agent = mission.auction.agents[robot.index]
+    position, _ = agent.peer_positions[teammate_index]
+    cycle = mission.auction.channel.params.tdma_slot_s * len(mission.robots)
+    return cycle + math.dist(robot.view[0], position) / mission.params.speed_m_s
+
+
+def _fly_and_lose(mission: Mission, params: MissionParams, idle: bool = True):
+    """rov1 flies to a view while rov0 says it is idle (or busy), then loses its fix on the way. Returns
+    the robot, its agent, the task and the time it was lost."""
+    robot = mission.robots["rov1"]
+    agent = mission.auction.agents[robot.index]
+    mission._start_exploring(robot, 0.0)
+    task = agent.discover_task([-1.0, -0.6, 1.0], [1.0, 0.0, 0.0], now_s=0.0)
+    agent.build_bundle(0.0)
+    robot.activity = "idle"
+    mission._advance_activity(robot, 1.0)
+    assert robot.activity == "fly" and robot.task_key == task.key
+    heard = _idle_teammate_heard(mission, 1.0, idle=idle)
+    robot.visual_updates, robot.position_sigma_m, robot.fixes_seen = 1, 0.08, 0
+    assert not mission._lost(robot, heard)
+    mission._count_time_use(heard, 5.0)  # found, flying: no time lost on the way
+    mission._advance_activity(robot, heard)
+    assert robot.activity == "fly" and agent.path_keys() == [task.key] and robot.task_lost_s == 0.0
+    lost_at = heard + params.lost_after_s + 0.1
+    assert mission._lost(robot, lost_at)
+    return robot, agent, task, lost_at
+
+
+def test_a_robot_lost_on_its_way_hands_the_view_to_a_teammate_with_nothing_left_to_do(tmp_path):
+    # the robot with a DVL has finished; its teammate without one, lost on its way to its last view for
+    # as long as the hand-over would take, hands the view over, and the finished robot wins it
+    with mission_at_rest(tmp_path, duration_s=10.0) as (mission, params):
+        assert params.lost_hand_over
+        robot, agent, task, lost_at = _fly_and_lose(mission, params)
+        teammate = mission.auction.agents[mission.robots["rov0"].index]
+        cost = _hand_over_cost_s(mission, robot, teammate.index)
+        assert 5.0 < cost < params.peer_fresh_s  # a cycle of some 8 s and a flight of a few seconds
+        # lost for less than the hand-over costs: it keeps the view (it may well be found on the way)
+        mission._count_time_use(lost_at, cost - 0.5)
+        now = lost_at + cost - 0.5
+        mission._advance_activity(robot, now)
+        assert robot.activity == "fly" and agent.path_keys() == [task.key]
+        # found again, it flies on, and the time it flies found does not count
+        robot.visual_updates = 2
+        assert not mission._lost(robot, now)
+        mission._count_time_use(now + 1.0, 1.0)
+        mission._advance_activity(robot, now + 1.0)
+        assert robot.activity == "fly" and robot.task_lost_s == pytest.approx(cost - 0.5)
+        # lost again, and for as long as the hand-over costs all told: it hands the view over
+        now += 1.0 + params.lost_after_s + 0.1
+        assert mission._lost(robot, now)
+        mission._count_time_use(now, 1.0)
+        mission._advance_activity(robot, now)
+        assert robot.activity == "idle" and task.key in robot.skipped and agent.path_keys() == []
+        mission.auction.advance_to(now + 30.0)
+        assert teammate.path_keys() == [task.key]
+        # its next view starts with no time lost
+        other = agent.discover_task([-1.2, -0.4, 1.0], [1.0, 0.0, 0.0], now_s=now + 30.0)
+        agent.build_bundle(now + 30.0)
+        mission._advance_activity(robot, now + 30.0)
+        assert robot.task_key == other.key and robot.task_lost_s == 0.0
+    handed = [e for e in read_events(tmp_path) if e["kind"] == "handed_over"]
+    assert [(e["robot"], e["task"], e["to"]) for e in handed] == [("rov1", task.key, "rov0")]
+    assert handed[0]["lost_s"] == pytest.approx(cost + 0.5, abs=0.01)
+
+
+@pytest.mark.parametrize("case", ["busy", "stale", "off", "no dvl"])
+def test_a_lost_robot_keeps_its_view_when_no_teammate_is_known_to_be_free(tmp_path, case):
+    # the teammate busy, or heard idle longer ago than peer_fresh_s, or the rule off, or the idle
+    # teammate without a DVL (it may be standing down, lost itself, and would bid on nothing): it keeps
+    # the view, however long it has been lost on the way
+    settings = {"lost_hand_over": False} if case == "off" else {}
+    with mission_at_rest(tmp_path, duration_s=10.0, **settings) as (mission, params):
+        if case == "no dvl":
+            mission.robots["rov0"].has_dvl = False
+        robot, agent, task, lost_at = _fly_and_lose(mission, params, idle=case != "busy")
+        now = lost_at + (params.peer_fresh_s if case == "stale" else 0.0)
+        mission._count_time_use(now, 200.0)
+        mission._advance_activity(robot, now)
+        assert robot.activity == "fly" and agent.path_keys() == [task.key]
+    assert not [e for e in read_events(tmp_path) if e["kind"] == "handed_over"]
+    for bad in ("yes", 1):
+        with pytest.raises(ValueError, match="lost_hand_over"):
+            MissionParams(lost_hand_over=bad)
+
+
 def test_a_robot_still_lost_after_its_recovery_stands_down_until_it_has_a_fix(tmp_path):
     # lost on its way to a view, home and swept, and still lost: it cannot tell when it reaches any view,
     # so it releases its tasks to its teammate and flies none; found again, it bids again

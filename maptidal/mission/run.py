@@ -176,6 +176,16 @@ class MissionParams:
     # timeouts from 163 s a mission to 18 s, but on variant A the robots met more, three missions of ten
     # with minutes of contact (README, "Without a DVL")
     lost_give_up: int = 0
+    # a robot lost on its way to a view hands the view over to a teammate with a DVL (a team knows its
+    # robots' sensors) that last said, within peer_fresh_s, that it had nothing left to do, once the time
+    # it has been lost on the way to that view reaches what the hand-over costs: a TDMA cycle for the
+    # news to reach the teammate and the teammate's flight to the view (the break-even rule of renting
+    # against buying, which never pays more than twice the better choice made in hindsight). It gives
+    # the view up (a "handed_over" event) and the teammate, which never loses its position, wins it. In
+    # the default tank's missions the robot with the DVL sat done for the last 20 to 150 s while its
+    # teammate, lost again and again on its way to its last views, flew home and back to each until it
+    # found a fix there or timed out
+    lost_hand_over: bool = True
     # a robot still lost when its recovery (home, and the sweep there) is over stands down: it has tried
     # the view its map knows best and found no fix there, so its estimate is off by more than
     # relocalisation reaches, and it cannot tell when it reaches any view or look. It releases its
@@ -352,6 +362,8 @@ class MissionParams:
             raise ValueError(f"lost_sigma_m must be positive, got {self.lost_sigma_m!r}")
         if not (isinstance(self.lost_give_up, int) and self.lost_give_up >= 0):
             raise ValueError(f"lost_give_up must be a whole number >= 0, got {self.lost_give_up!r}")
+        if not isinstance(self.lost_hand_over, bool):
+            raise ValueError(f"lost_hand_over must be true or false, got {self.lost_hand_over!r}")
         if not (math.isfinite(self.stall_s) and self.stall_s >= 0 and math.isfinite(self.stall_move_m)):
             raise ValueError(f"stall_s must be finite and >= 0, stall_move_m finite; got {self.stall_s!r}")
         if not (math.isfinite(self.clearance_m) and self.clearance_m >= 0):
@@ -517,6 +529,7 @@ class _Robot:
     # what made it lost: "no_fix" or "uncertain" (MissionParams.lost_after_s, lost_sigma_m)
     lost_why: str = ""
     task_losses: int = 0  # how many times it was lost on its way to its current task
+    task_lost_s: float = 0.0  # ... and for how long, all told (MissionParams.lost_hand_over)
     position_sigma_m: float = 0.0  # its front end's horizontal standard deviation, as of the last frame
     home_position: np.ndarray = field(default_factory=lambda: np.zeros(3))  # where it explored from
     home_yaw: float = 0.0  # the heading it explored along (its map lies that way)
@@ -878,6 +891,8 @@ class Mission:
         for robot in self.robots.values():
             kind = occupation(robot.activity, robot.lost, robot.yielding, robot.explored)
             robot.time_use.add(now, elapsed_s, kind)
+            if robot.lost and robot.activity == "fly":
+                robot.task_lost_s += elapsed_s
 
     def _teammates_heard(self, robot: _Robot, now: float) -> np.ndarray:
         """Rows ``(x, y, z, age_s)``: where each teammate's last message put it, and how long ago."""
@@ -1385,6 +1400,7 @@ class Mission:
             robot.view = (np.asarray(task.position, float), np.asarray(task.direction, float))
             robot.route_start_s, robot.task_started_s, robot.task_key = now, now, key
             robot.within_since_s, robot.still_at, robot.task_losses = None, None, 0
+            robot.task_lost_s = 0.0
             robot.activity = "fly"
             self.tasks.get(key, {})["assigned_to"] = robot.name
             self.writer.event(now, "flying", robot=robot.name, task=key)
@@ -1419,8 +1435,38 @@ class Mission:
                 self._give_up(robot, key, now, "stalled", still_s=self.params.stall_s)
             elif 0 < self.params.lost_give_up <= robot.task_losses:
                 self._give_up(robot, key, now, "gave_up", lost=robot.task_losses)
+            elif robot.lost and (taker := self._taker(robot, agent, now)) is not None:
+                self._give_up(
+                    robot,
+                    key,
+                    now,
+                    "handed_over",
+                    to=self.robots_by_index[taker].name,
+                    lost_s=round(robot.task_lost_s, 2),
+                )
             elif now - robot.task_started_s > self.params.task_timeout_s:
                 self._give_up(robot, key, now, "timeout")
+
+    def _taker(self, robot: _Robot, agent, now: float) -> int | None:
+        """The teammate that ``robot``, lost on its way to its view, hands the view to
+        (``lost_hand_over``), or None: one with a DVL whose last message, at most ``peer_fresh_s`` old,
+        said it had nothing left to do, and for which the hand-over (a TDMA cycle, then its flight to the
+        view from where it was heard, at ``speed_m_s``) costs no more than the time ``robot`` has been
+        lost on its way there. Only a teammate with a DVL: one without may be standing down, lost
+        itself, and it says it is idle then too, but bids on nothing."""
+        if not self.params.lost_hand_over:
+            return None
+        cycle_s = self.auction.channel.params.tdma_slot_s * len(self.auction.order)
+        view = robot.view[0]
+        for peer, idle in sorted(agent.peer_idle.items()):
+            heard = agent.peer_positions.get(peer)
+            if not (idle and heard is not None and self.robots_by_index[peer].has_dvl):
+                continue
+            position, heard_s = heard
+            flight_s = float(np.linalg.norm(view - position)) / self.params.speed_m_s
+            if now - heard_s <= self.params.peer_fresh_s and robot.task_lost_s >= cycle_s + flight_s:
+                return peer
+        return None
 
     def _retire(self, robot: _Robot, key: int, now: float) -> None:
         """``robot`` retires task ``key``, which the views the team has taken cover on its map

@@ -85,6 +85,10 @@ LAG_TESTS = [
     "tests/test_batched.py",
 ]
 PUSH_TESTS = ["tests/test_unmodelled_motion.py"]
+HAND_OVER_TESTS = [
+    "tests/test_localisation_loop.py::test_a_robot_lost_on_its_way_hands_the_view_to_a_teammate_with_nothing_left_to_do",
+    "tests/test_localisation_loop.py::test_a_lost_robot_keeps_its_view_when_no_teammate_is_known_to_be_free",
+]
 TESTS_OF_GROUP = {
     "M": TESTS,
     "F": FLIGHT_TESTS,
@@ -105,6 +109,7 @@ TESTS_OF_GROUP = {
     "C": COMPARE_TESTS,
     "K": LAG_TESTS,
     "A": PUSH_TESTS,
+    "H": HAND_OVER_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -1956,6 +1961,68 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "maptidal/perception/unmodelled.py",
                 "difference = [difference[i] - glide[i] for i in range(3)]",
                 "difference = difference",
+            )
+        ],
+    ),
+    "H1": (
+        "a teammate without a DVL taken for one that can take the view",
+        [
+            (
+                "maptidal/mission/run.py",
+                "if not (idle and heard is not None and self.robots_by_index[peer].has_dvl):",
+                "if not (idle and heard is not None):",
+            )
+        ],
+    ),
+    "H2": (
+        "a teammate heard idle long ago taken as idle now",
+        [
+            (
+                "maptidal/mission/run.py",
+                "if now - heard_s <= self.params.peer_fresh_s and robot.task_lost_s",
+                "if robot.task_lost_s",
+            )
+        ],
+    ),
+    "H3": (
+        "the view handed over at the first loss, whatever the hand-over costs",
+        [("maptidal/mission/run.py", " and robot.task_lost_s >= cycle_s + flight_s:", ":")],
+    ),
+    "H4": (
+        "a busy teammate taken for an idle one",
+        [("maptidal/mission/run.py", "if not (idle and heard is not None", "if not (heard is not None")],
+    ),
+    "H5": (
+        "the teammate's flight left out of the hand-over's cost",
+        [
+            (
+                "maptidal/mission/run.py",
+                "robot.task_lost_s >= cycle_s + flight_s",
+                "robot.task_lost_s >= cycle_s",
+            )
+        ],
+    ),
+    "H6": (
+        "the time flown found counted as lost on the way",
+        [
+            (
+                "maptidal/mission/run.py",
+                'if robot.lost and robot.activity == "fly":\n                robot.task_lost_s',
+                'if robot.activity == "fly":\n                robot.task_lost_s',
+            )
+        ],
+    ),
+    "H7": (
+        "the time lost carried over to the next view",
+        [("maptidal/mission/run.py", "            robot.task_lost_s = 0.0\n", "")],
+    ),
+    "H8": (
+        "a robot found again hands its view over",
+        [
+            (
+                "maptidal/mission/run.py",
+                "elif robot.lost and (taker := self._taker(",
+                "elif (taker := self._taker(",
             )
         ],
     ),
