@@ -115,9 +115,9 @@ def test_a_robot_that_lost_its_fix_is_found_again_at_its_next_sure_fix(tmp_path)
     assert lost[0]["sigma_m"] == pytest.approx(0.08) and lost[0]["unfixed_s"] > params.lost_after_s
 
 
-def _lose_twice_on_the_way(mission: Mission, params: MissionParams):
-    """The robot without a DVL, given a view, flies to it and is lost twice on the way (found again
-    between). Returns the robot, its agent and the task."""
+def _flying_to_a_view(mission: Mission):
+    """rov1, the robot without a DVL, after its sweep, given one view and flying to it at 1 s. Returns the
+    robot, its agent and the task."""
     robot = mission.robots["rov1"]
     agent = mission.auction.agents[robot.index]
     mission._start_exploring(robot, 0.0)
@@ -127,6 +127,13 @@ def _lose_twice_on_the_way(mission: Mission, params: MissionParams):
     robot.activity = "idle"
     mission._advance_activity(robot, 1.0)
     assert robot.activity == "fly" and robot.task_key == task.key and robot.task_losses == 0
+    return robot, agent, task
+
+
+def _lose_twice_on_the_way(mission: Mission, params: MissionParams):
+    """The robot without a DVL, given a view, flies to it and is lost twice on the way (found again
+    between). Returns the robot, its agent and the task."""
+    robot, agent, task = _flying_to_a_view(mission)
     robot.visual_updates, robot.position_sigma_m = 1, 0.08
     assert not mission._lost(robot, 1.0)
     first = 1.0 + params.lost_after_s + 0.1
@@ -200,14 +207,7 @@ def _hand_over_cost_s(mission: Mission, robot, teammate_index: int) -> float:
 def _fly_and_lose(mission: Mission, params: MissionParams, idle: bool = True):
     """rov1 flies to a view while rov0 says it is idle (or busy), then loses its fix on the way. Returns
     the robot, its agent, the task and the time it was lost."""
-    robot = mission.robots["rov1"]
-    agent = mission.auction.agents[robot.index]
-    mission._start_exploring(robot, 0.0)
-    task = agent.discover_task([-1.0, -0.6, 1.0], [1.0, 0.0, 0.0], now_s=0.0)
-    agent.build_bundle(0.0)
-    robot.activity = "idle"
-    mission._advance_activity(robot, 1.0)
-    assert robot.activity == "fly" and robot.task_key == task.key
+    robot, agent, task = _flying_to_a_view(mission)
     heard = _idle_teammate_heard(mission, 1.0, idle=idle)
     robot.visual_updates, robot.position_sigma_m, robot.fixes_seen = 1, 0.08, 0
     assert not mission._lost(robot, heard)
@@ -222,8 +222,7 @@ def _fly_and_lose(mission: Mission, params: MissionParams, idle: bool = True):
 def test_a_robot_lost_on_its_way_hands_the_view_to_a_teammate_with_nothing_left_to_do(tmp_path):
     # the robot with a DVL has finished; its teammate without one, lost on its way to its last view for
     # as long as the hand-over would take, hands the view over, and the finished robot wins it
-    with mission_at_rest(tmp_path, duration_s=10.0) as (mission, params):
-        assert params.lost_hand_over
+    with mission_at_rest(tmp_path, duration_s=10.0, lost_hand_over=True) as (mission, params):
         robot, agent, task, lost_at = _fly_and_lose(mission, params)
         teammate = mission.auction.agents[mission.robots["rov0"].index]
         cost = _hand_over_cost_s(mission, robot, teammate.index)
@@ -239,10 +238,18 @@ def test_a_robot_lost_on_its_way_hands_the_view_to_a_teammate_with_nothing_left_
         mission._count_time_use(now + 1.0, 1.0)
         mission._advance_activity(robot, now + 1.0)
         assert robot.activity == "fly" and robot.task_lost_s == pytest.approx(cost - 0.5)
-        # lost again, and for as long as the hand-over costs all told: it hands the view over
+        # lost again, for as long as the hand-over costs all told, but found again before it decides:
+        # found, it flies on
         now += 1.0 + params.lost_after_s + 0.1
         assert mission._lost(robot, now)
         mission._count_time_use(now, 1.0)
+        robot.visual_updates = 3
+        assert not mission._lost(robot, now)
+        mission._advance_activity(robot, now)
+        assert robot.activity == "fly" and agent.path_keys() == [task.key]
+        # lost once more: it hands the view over at once
+        now += params.lost_after_s + 0.1
+        assert mission._lost(robot, now)
         mission._advance_activity(robot, now)
         assert robot.activity == "idle" and task.key in robot.skipped and agent.path_keys() == []
         mission.auction.advance_to(now + 30.0)
@@ -259,11 +266,12 @@ def test_a_robot_lost_on_its_way_hands_the_view_to_a_teammate_with_nothing_left_
 
 @pytest.mark.parametrize("case", ["busy", "stale", "off", "no dvl"])
 def test_a_lost_robot_keeps_its_view_when_no_teammate_is_known_to_be_free(tmp_path, case):
-    # the teammate busy, or heard idle longer ago than peer_fresh_s, or the rule off, or the idle
-    # teammate without a DVL (it may be standing down, lost itself, and would bid on nothing): it keeps
-    # the view, however long it has been lost on the way
-    settings = {"lost_hand_over": False} if case == "off" else {}
+    # the teammate busy, or heard idle longer ago than peer_fresh_s, or the rule off (the default: README,
+    # "Without a DVL", says why), or the idle teammate without a DVL (it may be standing down, lost
+    # itself, and would bid on nothing): it keeps the view, however long it has been lost on the way
+    settings = {} if case == "off" else {"lost_hand_over": True}
     with mission_at_rest(tmp_path, duration_s=10.0, **settings) as (mission, params):
+        assert params.lost_hand_over == (case != "off")
         if case == "no dvl":
             mission.robots["rov0"].has_dvl = False
         robot, agent, task, lost_at = _fly_and_lose(mission, params, idle=case != "busy")
@@ -282,15 +290,8 @@ def test_a_robot_still_lost_after_its_recovery_stands_down_until_it_has_a_fix(tm
     # so it releases its tasks to its teammate and flies none; found again, it bids again
     with mission_at_rest(tmp_path, duration_s=10.0) as (mission, params):
         assert params.lost_stand_down
-        robot = mission.robots["rov1"]
-        agent = mission.auction.agents[robot.index]
         teammate = mission.auction.agents[mission.robots["rov0"].index]
-        mission._start_exploring(robot, 0.0)
-        task = agent.discover_task([-1.0, -0.6, 1.0], [1.0, 0.0, 0.0], now_s=0.0)
-        agent.build_bundle(0.0)
-        robot.activity = "idle"
-        mission._advance_activity(robot, 1.0)
-        assert robot.activity == "fly" and robot.task_key == task.key
+        robot, agent, task = _flying_to_a_view(mission)
         robot.visual_updates, robot.position_sigma_m = 1, 0.08
         assert not mission._lost(robot, 1.0)
         lost_at = 1.0 + params.lost_after_s + 0.1
@@ -363,13 +364,7 @@ def test_a_robot_lost_for_good_is_not_waited_for_and_the_ending_says_so(tmp_path
 
 def test_without_standing_down_a_lost_robot_keeps_its_task(tmp_path):
     with mission_at_rest(tmp_path, duration_s=10.0, lost_stand_down=False) as (mission, params):
-        robot = mission.robots["rov1"]
-        agent = mission.auction.agents[robot.index]
-        mission._start_exploring(robot, 0.0)
-        task = agent.discover_task([-1.0, -0.6, 1.0], [1.0, 0.0, 0.0], now_s=0.0)
-        agent.build_bundle(0.0)
-        robot.activity = "idle"
-        mission._advance_activity(robot, 1.0)
+        robot, agent, task = _flying_to_a_view(mission)
         robot.visual_updates, robot.position_sigma_m = 1, 0.08
         mission._lost(robot, 1.0)
         lost_at = 1.0 + params.lost_after_s + 0.1

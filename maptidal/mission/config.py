@@ -14,7 +14,8 @@
     watch_pushes = false   # true: the accelerometer against the motion model grows the uncertainty of a
                            # robot pushed or blocked (false, the default: it grows with time alone)
     lost_give_up = 0       # a robot lost this many times on its way to one view gives it up (0: never)
-    lost_hand_over = true  # a robot lost on its way to a view hands it to a teammate with nothing left to do
+    lost_hand_over = false # true: a robot lost on its way to a view hands it to a teammate with a DVL
+                           # that has nothing left to do
     lost_stand_down = true # a robot still lost after flying home and sweeping there releases its tasks
                            # and holds where it is until it has a fix (false: it keeps them)
     render_samples = 4     # the images' anti-aliasing samples (0: off, about twice as fast on a CPU)

@@ -27,9 +27,11 @@ the channel too. The capture is judged on the true camera pose (:mod:`maptidal.m
 only verified views are scored. A view it cannot pitch to is declined, with the reason in the log.
 
 A robot that times out on a task gives it up (:meth:`maptidal.allocation.agent.CBBAAgent.give_up`): it
-leaves its bundle, so a teammate can win it. The mission ends when every robot has explored and every
-task is done or given up by every live robot (a robot standing down is not waited for), or at
-``duration_s``.
+leaves its bundle, so a teammate can win it. With ``lost_hand_over``, a robot without a DVL lost on its
+way to a view hands the view over so to a teammate with a DVL that said it had nothing left to do,
+once it has been lost on its way there as long as the hand-over takes. The mission ends when every
+robot has explored and every task is done or given up by every live robot (a robot standing down is
+not waited for), or at ``duration_s``.
 Scripted events: a robot failing (it stops and falls silent; CBBA releases its tasks after the agents'
 failure timeout) and a current. Outputs go to the output folder as the mission runs
 (:mod:`maptidal.mission.outputs`).
@@ -182,10 +184,11 @@ class MissionParams:
     # news to reach the teammate and the teammate's flight to the view (the break-even rule of renting
     # against buying, which never pays more than twice the better choice made in hindsight). It gives
     # the view up (a "handed_over" event) and the teammate, which never loses its position, wins it. In
-    # the default tank's missions the robot with the DVL sat done for the last 20 to 150 s while its
-    # teammate, lost again and again on its way to its last views, flew home and back to each until it
-    # found a fix there or timed out
-    lost_hand_over: bool = True
+    # the default tank's missions the robot with the DVL first ran out of work 13 to 183 s before the
+    # end, while its teammate, lost again and again on its way to its last views, flew home and back to
+    # each until it found a fix there or timed out. Off by default: within the seeds' noise on every
+    # tank, and the teammate, sent where the lost robot was bound, met it more (README, "Without a DVL")
+    lost_hand_over: bool = False
     # a robot still lost when its recovery (home, and the sweep there) is over stands down: it has tried
     # the view its map knows best and found no fix there, so its estimate is off by more than
     # relocalisation reaches, and it cannot tell when it reaches any view or look. It releases its

@@ -1,8 +1,10 @@
 """Re-run the mutation lists of tests/README.md (M: physics, F: flight modes and estimator, V: done means
 seen, L: localisation, S: sharing discoveries, T: the closed tank, I: interrupts, B: the batched
-environment, N: the compiled flight stack, W: keeping clear of a teammate's way, X: the box to inspect and
-retiring covered tasks, Y: what exploring counts and the survey's route, Z: a lost robot standing down):
-apply each mutation to the source, run its group's tests, record which test fails first, and restore the
+environment, N: the compiled flight stack, D: dense depth, P: planners, W: keeping clear of a teammate's
+way, X: the box to inspect and retiring covered tasks, Y: what exploring counts and the survey's route,
+Z: a lost robot standing down, U: time use, C: comparing batches, K: the IMU's period mean and the
+thrusters' lag, A: the accelerometer's watch, H: a lost robot handing its view over): apply each
+mutation to the source, run its group's tests, record which test fails first, and restore the
 file. Every mutation must be killed.
 
     python tests/mutations/run_mutations.py            # all
@@ -2023,6 +2025,16 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "maptidal/mission/run.py",
                 "elif robot.lost and (taker := self._taker(",
                 "elif (taker := self._taker(",
+            )
+        ],
+    ),
+    "H9": (
+        "the hand-over on by default",
+        [
+            (
+                "maptidal/mission/run.py",
+                "    lost_hand_over: bool = False\n",
+                "    lost_hand_over: bool = True\n",
             )
         ],
     ),
