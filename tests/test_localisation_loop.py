@@ -285,6 +285,18 @@ def test_a_lost_robot_keeps_its_view_when_no_teammate_is_known_to_be_free(tmp_pa
             MissionParams(lost_hand_over=bad)
 
 
+def test_a_mission_file_turns_the_hand_over_on(tmp_path):
+    from maptidal.mission.config import prepare_mission
+    from maptidal.paths import asset
+
+    path = tmp_path / "mission.toml"
+    path.write_text(asset("scenarios", "mission.toml").read_text() + "\n[mission]\nlost_hand_over = true\n")
+    _, params = prepare_mission(path)
+    assert params.lost_hand_over is True
+    _, params = prepare_mission(None)
+    assert params.lost_hand_over is False
+
+
 def test_a_robot_still_lost_after_its_recovery_stands_down_until_it_has_a_fix(tmp_path):
     # lost on its way to a view, home and swept, and still lost: it cannot tell when it reaches any view,
     # so it releases its tasks to its teammate and flies none; found again, it bids again

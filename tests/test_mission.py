@@ -355,6 +355,7 @@ def _alive(pid: int) -> bool:
         ("[mission]\ninspect_box = 3\n", "inspect_box"),
         ("[mission]\nretire_taken = 1\n", "retire_taken"),
         ("[mission]\nlost_stand_down = 0\n", "lost_stand_down"),
+        ('[mission]\nlost_hand_over = "yes"\n', "lost_hand_over"),
         ('[[mission.events]]\ntime_s = 5\nkind = "fail"\nrobot = "rov7"\n', "rov7"),
         ("[mission]\nspeed = 3\n", "[mission] takes only"),
         ('[[mission.events]]\ntime_s = 5\nkind = "join"\nrobot = "rov9"\n', "rov9"),
