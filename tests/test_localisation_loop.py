@@ -204,17 +204,25 @@ def _hand_over_cost_s(mission: Mission, robot, teammate_index: int) -> float:
     return cycle + math.dist(robot.view[0], position) / mission.params.speed_m_s
 
 
+def _fly_on(mission: Mission, now: float, seconds: float) -> float:
+    """The mission's clock runs ``seconds`` on from ``now``, each robot's time going to what it does and
+    whether it is lost (:meth:`Mission._count_time_use`); returns the new time."""
+    mission._count_time_use(now + seconds, seconds)
+    return now + seconds
+
+
 def _fly_and_lose(mission: Mission, params: MissionParams, idle: bool = True):
     """rov1 flies to a view while rov0 says it is idle (or busy), then loses its fix on the way. Returns
     the robot, its agent, the task and the time it was lost."""
     robot, agent, task = _flying_to_a_view(mission)
     heard = _idle_teammate_heard(mission, 1.0, idle=idle)
     robot.visual_updates, robot.position_sigma_m, robot.fixes_seen = 1, 0.08, 0
-    assert not mission._lost(robot, heard)
-    mission._count_time_use(heard, 5.0)  # found, flying: no time lost on the way
-    mission._advance_activity(robot, heard)
-    assert robot.activity == "fly" and agent.path_keys() == [task.key] and robot.task_lost_s == 0.0
-    lost_at = heard + params.lost_after_s + 0.1
+    assert not mission._lost(robot, 1.0)
+    now = _fly_on(mission, 1.0, heard - 1.0)  # found, flying: no time lost on the way
+    mission._advance_activity(robot, now)
+    assert robot.activity == "fly" and agent.path_keys() == [task.key]
+    assert mission._lost_on_the_way_s(robot, now) == 0.0
+    lost_at = _fly_on(mission, now, params.lost_after_s + 0.1)
     assert mission._lost(robot, lost_at)
     return robot, agent, task, lost_at
 
@@ -228,37 +236,37 @@ def test_a_robot_lost_on_its_way_hands_the_view_to_a_teammate_with_nothing_left_
         cost = _hand_over_cost_s(mission, robot, teammate.index)
         assert 5.0 < cost < params.peer_fresh_s  # a cycle of some 8 s and a flight of a few seconds
         # lost for less than the hand-over costs: it keeps the view (it may well be found on the way)
-        mission._count_time_use(lost_at, cost - 0.5)
-        now = lost_at + cost - 0.5
+        now = _fly_on(mission, lost_at, cost - 0.5)
         mission._advance_activity(robot, now)
         assert robot.activity == "fly" and agent.path_keys() == [task.key]
         # found again, it flies on, and the time it flies found does not count
         robot.visual_updates = 2
         assert not mission._lost(robot, now)
-        mission._count_time_use(now + 1.0, 1.0)
-        mission._advance_activity(robot, now + 1.0)
-        assert robot.activity == "fly" and robot.task_lost_s == pytest.approx(cost - 0.5)
+        now = _fly_on(mission, now, 1.0)
+        mission._advance_activity(robot, now)
+        assert robot.activity == "fly" and mission._lost_on_the_way_s(robot, now) == pytest.approx(cost - 0.5)
         # lost again, for as long as the hand-over costs all told, but found again before it decides:
         # found, it flies on
-        now += 1.0 + params.lost_after_s + 0.1
+        now = _fly_on(mission, now, params.lost_after_s + 0.1)
         assert mission._lost(robot, now)
-        mission._count_time_use(now, 1.0)
+        now = _fly_on(mission, now, 1.0)
         robot.visual_updates = 3
         assert not mission._lost(robot, now)
         mission._advance_activity(robot, now)
         assert robot.activity == "fly" and agent.path_keys() == [task.key]
         # lost once more: it hands the view over at once
-        now += params.lost_after_s + 0.1
+        now = _fly_on(mission, now, params.lost_after_s + 0.1)
         assert mission._lost(robot, now)
         mission._advance_activity(robot, now)
         assert robot.activity == "idle" and task.key in robot.skipped and agent.path_keys() == []
         mission.auction.advance_to(now + 30.0)
         assert teammate.path_keys() == [task.key]
         # its next view starts with no time lost
-        other = agent.discover_task([-1.2, -0.4, 1.0], [1.0, 0.0, 0.0], now_s=now + 30.0)
-        agent.build_bundle(now + 30.0)
-        mission._advance_activity(robot, now + 30.0)
-        assert robot.task_key == other.key and robot.task_lost_s == 0.0
+        now = _fly_on(mission, now, 30.0)
+        other = agent.discover_task([-1.2, -0.4, 1.0], [1.0, 0.0, 0.0], now_s=now)
+        agent.build_bundle(now)
+        mission._advance_activity(robot, now)
+        assert robot.task_key == other.key and mission._lost_on_the_way_s(robot, now) == 0.0
     handed = [e for e in read_events(tmp_path) if e["kind"] == "handed_over"]
     assert [(e["robot"], e["task"], e["to"]) for e in handed] == [("rov1", task.key, "rov0")]
     assert handed[0]["lost_s"] == pytest.approx(cost + 0.5, abs=0.01)
@@ -268,15 +276,19 @@ def test_a_robot_lost_on_its_way_hands_the_view_to_a_teammate_with_nothing_left_
 def test_a_lost_robot_keeps_its_view_when_no_teammate_is_known_to_be_free(tmp_path, case):
     # the teammate busy, or heard idle longer ago than peer_fresh_s, or the rule off (the default: README,
     # "Without a DVL", says why), or the idle teammate without a DVL (it may be standing down, lost
-    # itself, and would bid on nothing): it keeps the view, however long it has been lost on the way
+    # itself, and would bid on nothing): it keeps the view, though lost on the way for longer than the
+    # hand-over costs
     settings = {} if case == "off" else {"lost_hand_over": True}
     with mission_at_rest(tmp_path, duration_s=10.0, **settings) as (mission, params):
         assert params.lost_hand_over == (case != "off")
         if case == "no dvl":
             mission.robots["rov0"].has_dvl = False
         robot, agent, task, lost_at = _fly_and_lose(mission, params, idle=case != "busy")
-        now = lost_at + (params.peer_fresh_s if case == "stale" else 0.0)
-        mission._count_time_use(now, 200.0)
+        # lost until just before the teammate's message is too old (or just after, when stale)
+        heard_s = agent.peer_positions[mission.robots["rov0"].index][1]
+        lost_s = heard_s + params.peer_fresh_s + (0.5 if case == "stale" else -0.5) - lost_at
+        assert _hand_over_cost_s(mission, robot, mission.robots["rov0"].index) < lost_s
+        now = _fly_on(mission, lost_at, lost_s)
         mission._advance_activity(robot, now)
         assert robot.activity == "fly" and agent.path_keys() == [task.key]
     assert not [e for e in read_events(tmp_path) if e["kind"] == "handed_over"]

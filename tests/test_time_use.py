@@ -53,6 +53,15 @@ def test_the_periods_add_up_to_seconds_and_end_to_end_spans():
     assert list(document["seconds"]) == ["first sweep", "tasks", "giving way", "done"]  # OCCUPATIONS' order
     assert document["spans"][-1] == [5.0, 6.0, "done"]
     assert TimeUse().spans(3.0) == [] and TimeUse().as_dict(3.0) == {"seconds": {}, "spans": []}
+    # the seconds in one occupation from a moment on, spans cut there: each period's part after it here
+    for start in (0.0, 1.0, 2.75, 4.0, 6.0):
+        by_period = sum(
+            max(0.5 * n - max(0.5 * (n - 1), start), 0.0)
+            for n, kind in enumerate(periods, start=1)
+            if kind == "tasks"
+        )
+        assert use.seconds_since("tasks", start, 6.0) == pytest.approx(by_period)
+    assert use.seconds_since("lost", 0.0, 6.0) == 0.0 and use.seconds_since("done", 0.0, 5.5) == 0.5
 
 
 def test_the_batch_counts_the_teams_seconds_surveying_and_lost():

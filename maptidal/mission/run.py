@@ -532,7 +532,6 @@ class _Robot:
     # what made it lost: "no_fix" or "uncertain" (MissionParams.lost_after_s, lost_sigma_m)
     lost_why: str = ""
     task_losses: int = 0  # how many times it was lost on its way to its current task
-    task_lost_s: float = 0.0  # ... and for how long, all told (MissionParams.lost_hand_over)
     position_sigma_m: float = 0.0  # its front end's horizontal standard deviation, as of the last frame
     home_position: np.ndarray = field(default_factory=lambda: np.zeros(3))  # where it explored from
     home_yaw: float = 0.0  # the heading it explored along (its map lies that way)
@@ -894,8 +893,6 @@ class Mission:
         for robot in self.robots.values():
             kind = occupation(robot.activity, robot.lost, robot.yielding, robot.explored)
             robot.time_use.add(now, elapsed_s, kind)
-            if robot.lost and robot.activity == "fly":
-                robot.task_lost_s += elapsed_s
 
     def _teammates_heard(self, robot: _Robot, now: float) -> np.ndarray:
         """Rows ``(x, y, z, age_s)``: where each teammate's last message put it, and how long ago."""
@@ -1403,7 +1400,6 @@ class Mission:
             robot.view = (np.asarray(task.position, float), np.asarray(task.direction, float))
             robot.route_start_s, robot.task_started_s, robot.task_key = now, now, key
             robot.within_since_s, robot.still_at, robot.task_losses = None, None, 0
-            robot.task_lost_s = 0.0
             robot.activity = "fly"
             self.tasks.get(key, {})["assigned_to"] = robot.name
             self.writer.event(now, "flying", robot=robot.name, task=key)
@@ -1445,7 +1441,7 @@ class Mission:
                     now,
                     "handed_over",
                     to=self.robots_by_index[taker].name,
-                    lost_s=round(robot.task_lost_s, 2),
+                    lost_s=round(self._lost_on_the_way_s(robot, now), 2),
                 )
             elif now - robot.task_started_s > self.params.task_timeout_s:
                 self._give_up(robot, key, now, "timeout")
@@ -1460,6 +1456,7 @@ class Mission:
         if not self.params.lost_hand_over:
             return None
         cycle_s = self.auction.channel.params.tdma_slot_s * len(self.auction.order)
+        lost_s = self._lost_on_the_way_s(robot, now)
         view = robot.view[0]
         for peer, idle in sorted(agent.peer_idle.items()):
             heard = agent.peer_positions.get(peer)
@@ -1467,9 +1464,13 @@ class Mission:
                 continue
             position, heard_s = heard
             flight_s = float(np.linalg.norm(view - position)) / self.params.speed_m_s
-            if now - heard_s <= self.params.peer_fresh_s and robot.task_lost_s >= cycle_s + flight_s:
+            if now - heard_s <= self.params.peer_fresh_s and lost_s >= cycle_s + flight_s:
                 return peer
         return None
+
+    def _lost_on_the_way_s(self, robot: _Robot, now: float) -> float:
+        """How long ``robot`` has been lost, all told, since it set off for its current view."""
+        return robot.time_use.seconds_since("lost", robot.task_started_s, now)
 
     def _retire(self, robot: _Robot, key: int, now: float) -> None:
         """``robot`` retires task ``key``, which the views the team has taken cover on its map

@@ -94,6 +94,14 @@ class TimeUse:
             return list(self._spans)
         return [*self._spans, (self._since_s, now_s, self._current)]
 
+    def seconds_since(self, kind: str, start_s: float, now_s: float) -> float:
+        """The seconds spent in ``kind`` between ``start_s`` and ``now_s``."""
+        return sum(
+            max(min(end, now_s) - max(begin, start_s), 0.0)
+            for begin, end, held in self.spans(now_s)
+            if held == kind
+        )
+
     def as_dict(self, now_s: float) -> dict:
         """For ``mission.json``: the seconds per occupation (in the order of OCCUPATIONS, rounded to the
         millisecond) and the spans."""

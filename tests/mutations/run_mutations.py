@@ -1978,17 +1978,11 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
     ),
     "H2": (
         "a teammate heard idle long ago taken as idle now",
-        [
-            (
-                "maptidal/mission/run.py",
-                "if now - heard_s <= self.params.peer_fresh_s and robot.task_lost_s",
-                "if robot.task_lost_s",
-            )
-        ],
+        [("maptidal/mission/run.py", "if now - heard_s <= self.params.peer_fresh_s and lost_s", "if lost_s")],
     ),
     "H3": (
         "the view handed over at the first loss, whatever the hand-over costs",
-        [("maptidal/mission/run.py", " and robot.task_lost_s >= cycle_s + flight_s:", ":")],
+        [("maptidal/mission/run.py", " and lost_s >= cycle_s + flight_s:", ":")],
     ),
     "H4": (
         "a busy teammate taken for an idle one",
@@ -1996,27 +1990,21 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
     ),
     "H5": (
         "the teammate's flight left out of the hand-over's cost",
-        [
-            (
-                "maptidal/mission/run.py",
-                "robot.task_lost_s >= cycle_s + flight_s",
-                "robot.task_lost_s >= cycle_s",
-            )
-        ],
+        [("maptidal/mission/run.py", "lost_s >= cycle_s + flight_s", "lost_s >= cycle_s")],
     ),
     "H6": (
         "the time flown found counted as lost on the way",
-        [
-            (
-                "maptidal/mission/run.py",
-                'if robot.lost and robot.activity == "fly":\n                robot.task_lost_s',
-                'if robot.activity == "fly":\n                robot.task_lost_s',
-            )
-        ],
+        [("maptidal/mission/time_use.py", "            if held == kind\n", "")],
     ),
     "H7": (
         "the time lost carried over to the next view",
-        [("maptidal/mission/run.py", "            robot.task_lost_s = 0.0\n", "")],
+        [
+            (
+                "maptidal/mission/run.py",
+                'seconds_since("lost", robot.task_started_s, now)',
+                'seconds_since("lost", 0.0, now)',
+            )
+        ],
     ),
     "H8": (
         "a robot found again hands its view over",
