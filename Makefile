@@ -59,6 +59,7 @@ bench: setup
 	$(BIN)/python tests/bench/bench_batched.py --envs 16 64
 	$(BIN)/python tests/bench/bench_frontend.py
 	$(BIN)/python tests/bench/bench_relocalisation.py
+	$(BIN)/python tests/bench/bench_search.py
 	$(BIN)/python tests/bench/bench_mission.py
 
 # regenerate the front end's golden frames and outputs (tests/data/golden_frames) on purpose; prints what changed

@@ -479,3 +479,78 @@ def test_bad_parameters_are_refused():
         RelocalisationParams(min_inliers=1)
     with pytest.raises(ValueError, match="depth band"):
         RelocalisationParams(min_depth_m=2.0, max_depth_m=1.0)
+
+
+def _random_map_and_frame(rng: np.random.Generator, levels: int | None):
+    """An anchor map of points 0.5 to 3 m before a camera facing +x, and a frame of keypoints near some of
+    their pixels. Descriptors are continuous (``levels`` None) or drawn from a few values, so that equal
+    distances (ties) are common."""
+
+    def draw(count: int) -> np.ndarray:
+        if levels is None:
+            return rng.uniform(0, 60, (count, 128)).astype(np.float32)
+        return (rng.integers(0, levels, (count, 128)) * 7.0).astype(np.float32)
+
+    pose = CameraPose(np.array([-2.0, 0.0, 1.0]), facing_wall(float(rng.uniform(-20, 20))))
+    count = int(rng.integers(5, 120))
+    depth = rng.uniform(0.5, 3.0, count)
+    pixel = np.column_stack([rng.uniform(0, 320, count), rng.uniform(0, 200, count)])
+    camera = (
+        np.column_stack(
+            [
+                (pixel[:, 0] - INTRINSICS.cx) / INTRINSICS.fx,
+                (pixel[:, 1] - INTRINSICS.cy) / INTRINSICS.fy,
+                np.ones(count),
+            ]
+        )
+        * depth[:, None]
+    )
+    anchors = AnchorMap(INTRINSICS, RelocalisationParams(ratio=float(rng.uniform(0.6, 1.0))))
+    anchors.points = pose.position + camera @ pose.rotation.T
+    anchors.descriptors = draw(count)
+    anchors.sigmas = np.full(count, 0.01)
+    keys = int(rng.integers(1, 60))
+    near = rng.integers(0, count, keys)
+    pixels = np.clip(pixel[near] + rng.normal(0, 15, (keys, 2)), 0, [319, 199])
+    descriptors = draw(keys)
+    copied = rng.random(keys) < 0.5  # half of them a new look at an anchor's place
+    noise = rng.normal(0, 3, (int(copied.sum()), 128)) if levels is None else 0.0
+    descriptors[copied] = (anchors.descriptors[near[copied]] + noise).astype(np.float32)
+    valid = rng.random(keys) < 0.9
+    return anchors, pose, pixels, descriptors, valid
+
+
+def test_the_guided_match_is_the_literal_anchor_by_anchor_one():
+    """Against a match written out anchor by anchor, keypoint by keypoint (tests/bench/
+    literal_relocalisation.py), on random maps and frames: the same keypoints take the same anchors."""
+    from literal_relocalisation import literal_match
+
+    rng = np.random.default_rng(11)
+    matched_any = 0
+    for _ in range(150):
+        anchors, pose, pixels, descriptors, valid = _random_map_and_frame(rng, levels=None)
+        sigma = float(rng.uniform(0.0, 0.3))
+        keypoints, matched = anchors.match(pose, pixels, descriptors, valid, sigma)
+        assert (keypoints.tolist(), matched.tolist()) == literal_match(
+            anchors, pose, pixels, descriptors, valid, sigma
+        )
+        matched_any += len(matched) > 0
+    assert matched_any > 50  # the cases are not all empty
+
+
+def test_a_search_with_the_distances_worked_out_once_matches_as_keypoint_by_keypoint():
+    """The search's match from every keypoint's distances to every anchor (``all_distances``, worked out
+    once for the grid of predictions) against the keypoint-by-keypoint match, on descriptors drawn
+    from a few values so that ties are common: the same keypoints, the same anchors, every time."""
+    rng = np.random.default_rng(12)
+    ties = 0
+    for _ in range(300):
+        anchors, pose, pixels, descriptors, valid = _random_map_and_frame(rng, levels=int(rng.integers(1, 4)))
+        distances = anchors.all_distances(descriptors, valid)
+        for row in np.flatnonzero(valid):
+            ties += len(np.unique(distances[row])) < len(anchors)
+        sigma = float(rng.uniform(0.0, 0.3))
+        one_by_one = anchors.match(pose, pixels, descriptors, valid, sigma)
+        at_once = anchors.match(pose, pixels, descriptors, valid, sigma, distances)
+        assert [a.tolist() for a in one_by_one] == [a.tolist() for a in at_once]
+    assert ties > 1000  # ties are common

@@ -36,7 +36,9 @@ localised for a whole mission, where frame-to-frame odometry drifts without boun
   near twin for nearly every keypoint fails Lowe's test), and a robot 90 cm off stayed so. A robot
   still lost widens the search one ring of the grid per search, out to ``max_lost_search_m``, then
   starts over: a robot without a DVL pushed while in contact runs its motion model on while blocked, and
-  ends farther off than the first search reaches, and than its standard deviation says.
+  ends farther off than the first search reaches, and than its standard deviation says. A search
+  works out each keypoint's descriptor distance to every anchor once, for its whole grid, and matches
+  each prediction from those at once: the same matches as keypoint by keypoint, to the bit.
 
 OpenCV (SIFT descriptors), numpy and scipy only.
 """
@@ -44,6 +46,7 @@ OpenCV (SIFT descriptors), numpy and scipy only.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from collections import Counter
 from dataclasses import dataclass
@@ -264,6 +267,43 @@ def ray_spread(rays: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.arccos(np.clip(rays @ mean, -1.0, 1.0)) ** 2)))
 
 
+def _nearest_matches(
+    rows: np.ndarray, neighbours, visible: np.ndarray, distances: np.ndarray, params: RelocalisationParams
+) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`AnchorMap.match`'s choice, for every keypoint at once, from the descriptor distances of
+    every keypoint to every anchor (:meth:`AnchorMap.all_distances`): keypoint row ``rows[i]`` takes,
+    among its candidate anchors ``visible[neighbours[i]]``, the nearest (the first such candidate on a
+    tie), when that distance is at most ``max_distance`` and under ``ratio`` times the second nearest;
+    an anchor taken by several keypoints keeps the nearest (the earlier row on a tie). The same answer
+    as the per-keypoint loop (a test checks it on random ties), without a Python step per keypoint."""
+    empty = np.zeros(0, int), np.zeros(0, int)
+    counts = np.fromiter((len(near) for near in neighbours), int, len(rows))
+    owners = np.flatnonzero(counts)
+    if not len(owners):
+        return empty
+    candidates = visible[np.fromiter(itertools.chain.from_iterable(neighbours), int, int(counts.sum()))]
+    group = np.repeat(np.arange(len(owners)), counts[owners])
+    pair = distances[rows[owners][group], candidates]
+    starts = np.r_[0, np.cumsum(counts[owners])[:-1]]
+    first = np.minimum.reduceat(pair, starts)
+    at_minimum = np.flatnonzero(pair == first[group])
+    _, first_of_group = np.unique(group[at_minimum], return_index=True)
+    nearest = at_minimum[first_of_group]  # each keypoint's first candidate at its minimum
+    rest = pair.copy()
+    rest[nearest] = np.inf
+    second = np.minimum.reduceat(rest, starts)  # inf for a keypoint with one candidate
+    first64, second64 = first.astype(np.float64), second.astype(np.float64)  # compared as Python floats
+    ambiguous = (counts[owners] > 1) & (first64 >= params.ratio * second64)
+    passed = (first64 <= params.max_distance) & ~ambiguous
+    if not passed.any():
+        return empty
+    keypoints, anchors, score = rows[owners][passed], candidates[nearest][passed], first64[passed]
+    order = np.lexsort((keypoints, score, anchors))  # by anchor, then nearest, then the earlier row
+    anchors, keypoints = anchors[order], keypoints[order]
+    keep = np.r_[True, anchors[1:] != anchors[:-1]]
+    return keypoints[keep], anchors[keep]
+
+
 class AnchorMap:
     """The robot's own map of anchors, and relocalisation against it (module docstring)."""
 
@@ -298,9 +338,12 @@ class AnchorMap:
         descriptors: np.ndarray,
         valid: np.ndarray,
         sigma_m: float = 0.0,
+        distances: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Keypoint rows and the anchors they match, one keypoint per anchor (module docstring), under
-        the predicted ``pose`` of horizontal standard deviation ``sigma_m``."""
+        the predicted ``pose`` of horizontal standard deviation ``sigma_m``. ``distances``, when given,
+        holds each keypoint's descriptor distance to every anchor (:meth:`all_distances`), for a search
+        that matches one frame from many predictions."""
         p = self.params
         radius = self.search_radius_px(sigma_m)
         empty = np.zeros(0, int), np.zeros(0, int)
@@ -321,17 +364,19 @@ class AnchorMap:
         tree = cKDTree(projected[visible])
         rows = np.flatnonzero(valid)
         neighbours = tree.query_ball_point(pixels[rows], radius)
+        if distances is not None:
+            return _nearest_matches(rows, neighbours, visible, distances, p)
         best_anchor: dict[int, tuple[float, int]] = {}  # anchor -> (distance, keypoint row)
         for row, near in zip(rows.tolist(), neighbours, strict=True):
             if not near:
                 continue
             anchors = visible[np.asarray(near, int)]
-            distances = descriptor_distances(self.descriptors[anchors], descriptors[row][None])
-            order = np.argsort(distances, kind="stable")
-            first = float(distances[order[0]])
+            found = descriptor_distances(self.descriptors[anchors], descriptors[row][None])
+            order = np.argsort(found, kind="stable")
+            first = float(found[order[0]])
             if first > p.max_distance:
                 continue
-            if len(order) > 1 and first >= p.ratio * float(distances[order[1]]):
+            if len(order) > 1 and first >= p.ratio * float(found[order[1]]):
                 continue
             anchor = int(anchors[order[0]])
             if anchor not in best_anchor or first < best_anchor[anchor][0]:
@@ -341,6 +386,15 @@ class AnchorMap:
         anchors = np.array(sorted(best_anchor), int)
         keypoints = np.array([best_anchor[a][1] for a in anchors.tolist()], int)
         return keypoints, anchors
+
+    def all_distances(self, descriptors: np.ndarray, valid: np.ndarray) -> np.ndarray:
+        """The descriptor distance ``(N, A)`` of each ``valid`` keypoint to every anchor (rows of keypoints
+        without a descriptor left at zero): what :meth:`match` would work out pair by pair, the same
+        numbers, once for a search's many predictions."""
+        distances = np.zeros((len(descriptors), len(self.points)), np.float32)
+        for row in np.flatnonzero(valid).tolist():
+            distances[row] = descriptor_distances(self.descriptors, descriptors[row][None])
+        return distances
 
     def relocalise(
         self,
@@ -405,9 +459,10 @@ class AnchorMap:
         ``global_min_inliers`` and lying within ``bound`` of the prediction; None when none has them."""
         p = self.params
         best: tuple[Fix, np.ndarray] | None = None
+        distances = self.all_distances(descriptors, valid)  # once for the whole grid
         for dx, dy in offsets.tolist():
             moved = CameraPose(pose.position + np.array([dx, dy, 0.0]), pose.rotation)
-            keypoints, anchors = self.match(moved, pixels, descriptors, valid, p.global_step_m)
+            keypoints, anchors = self.match(moved, pixels, descriptors, valid, p.global_step_m, distances)
             if len(keypoints) < p.global_min_inliers:
                 continue
             fix, matched = self._attempt(

@@ -87,6 +87,10 @@ LAG_TESTS = [
     "tests/test_batched.py",
 ]
 PUSH_TESTS = ["tests/test_unmodelled_motion.py"]
+SEARCH_MATCH_TESTS = [
+    "tests/test_relocalisation.py::test_the_guided_match_is_the_literal_anchor_by_anchor_one",
+    "tests/test_relocalisation.py::test_a_search_with_the_distances_worked_out_once_matches_as_keypoint_by_keypoint",
+]
 HAND_OVER_TESTS = [
     "tests/test_localisation_loop.py::test_a_robot_lost_on_its_way_hands_the_view_to_a_teammate_with_nothing_left_to_do",
     "tests/test_localisation_loop.py::test_a_lost_robot_keeps_its_view_when_no_teammate_is_known_to_be_free",
@@ -112,6 +116,7 @@ TESTS_OF_GROUP = {
     "K": LAG_TESTS,
     "A": PUSH_TESTS,
     "H": HAND_OVER_TESTS,
+    "G": SEARCH_MATCH_TESTS,
 }
 
 # id: (description, [(file, old, new), ...])
@@ -2023,6 +2028,40 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "maptidal/mission/run.py",
                 "    lost_hand_over: bool = False\n",
                 "    lost_hand_over: bool = True\n",
+            )
+        ],
+    ),
+    "G1": (
+        "the search's ratio test lets an equal second nearest pass",
+        [
+            (
+                "maptidal/perception/relocalisation.py",
+                "(first64 >= params.ratio * second64)",
+                "(first64 > params.ratio * second64)",
+            )
+        ],
+    ),
+    "G2": (
+        "an anchor taken by two keypoints at one distance keeps the later",
+        [
+            (
+                "maptidal/perception/relocalisation.py",
+                "np.lexsort((keypoints, score, anchors))",
+                "np.lexsort((-keypoints, score, anchors))",
+            )
+        ],
+    ),
+    "G3": (
+        "the second nearest taken as the nearest",
+        [("maptidal/perception/relocalisation.py", "    rest[nearest] = np.inf\n", "")],
+    ),
+    "G4": (
+        "every keypoint's distances worked out from the first keypoint's descriptor",
+        [
+            (
+                "maptidal/perception/relocalisation.py",
+                "distances[row] = descriptor_distances(self.descriptors, descriptors[row][None])",
+                "distances[row] = descriptor_distances(self.descriptors, descriptors[0][None])",
             )
         ],
     ),

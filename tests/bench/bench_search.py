@@ -1,0 +1,85 @@
+"""Benchmark the lost robot's search (maptidal.perception.relocalisation.AnchorMap._search): the guided
+match from a grid of predictions with every keypoint's descriptor distances worked out once
+(``AnchorMap.all_distances``), against the same search matching keypoint by keypoint at each
+prediction (the version before), in the same process, on the searches of a real mission.
+
+The searches are those the default mission makes (seed 0, perception inline, where the robot without a
+DVL is pushed at 53 s and searches for its map), each taken with the anchor map as it stood; both ways
+must give the same fix, to the bit.
+
+    python tests/bench/bench_search.py [--duration S] [--seed N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import dataclasses
+import os
+import tempfile
+import time
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from maptidal.mission.config import prepare_mission
+from maptidal.mission.run import Mission
+from maptidal.perception import relocalisation
+
+
+def captured_searches(duration_s: float, seed: int) -> list:
+    """Each search of a mission: a copy of its anchor map (random state included) and its arguments."""
+    searches = []
+    search = relocalisation.AnchorMap._search
+
+    def capture(anchors, *args):
+        searches.append((copy.deepcopy(anchors), copy.deepcopy(args)))
+        return search(anchors, *args)
+
+    relocalisation.AnchorMap._search = capture
+    try:
+        scenario, params = prepare_mission(None, duration_s=duration_s, seed=seed)
+        params = dataclasses.replace(params, perception_process=False, plots=False)
+        with tempfile.TemporaryDirectory() as scratch:
+            Mission(scenario, params, scratch).run()
+    finally:
+        relocalisation.AnchorMap._search = search
+    return searches
+
+
+def timed(searches: list, keypoint_by_keypoint: bool) -> tuple[float, list]:
+    """Seconds for every search, and their answers (centre, inliers, matched rows)."""
+    total, answers = 0.0, []
+    for anchors, args in searches:
+        anchors = copy.deepcopy(anchors)
+        if keypoint_by_keypoint:  # no distances given: match works them out pair by pair, as before
+            anchors.all_distances = lambda descriptors, valid: None
+        start = time.perf_counter()
+        found = anchors._search(*args)
+        total += time.perf_counter() - start
+        answers.append(
+            None if found is None else (found[0].centre.tolist(), found[0].inliers, found[1].tolist())
+        )
+    return total, answers
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--duration", type=float, default=150.0, help="simulated seconds (default 150)")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    searches = captured_searches(args.duration, args.seed)
+    if not searches:
+        print("the mission made no search: try a longer one, or another seed")
+        return
+    before, old = timed(searches, keypoint_by_keypoint=True)
+    after, new = timed(searches, keypoint_by_keypoint=False)
+    print(f"{len(searches)} searches of the default mission (seed {args.seed}, {args.duration:g} s)")
+    print(f"keypoint by keypoint (before): {1000 * before / len(searches):7.1f} ms a search")
+    print(f"distances once (now):          {1000 * after / len(searches):7.1f} ms a search")
+    print(f"ratio before / now: {before / after:.2f}; the same fixes: {old == new}")
+
+
+if __name__ == "__main__":
+    main()
