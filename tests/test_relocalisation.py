@@ -554,3 +554,66 @@ def test_a_search_with_the_distances_worked_out_once_matches_as_keypoint_by_keyp
         at_once = anchors.match(pose, pixels, descriptors, valid, sigma, distances)
         assert [a.tolist() for a in one_by_one] == [a.tolist() for a in at_once]
     assert ties > 1000  # ties are common
+
+
+def test_locate_is_the_literal_ransac_hypothesis_by_hypothesis():
+    """``locate`` weighs every hypothesis at once; against RANSAC written out one hypothesis at a time,
+    each centre by its own least squares (tests/bench/literal_relocalisation.py), drawing the same pairs:
+    the same inliers and, to rounding, the same centre, on random scenes with outliers, points seen from
+    behind and points that share a ray."""
+    from literal_relocalisation import literal_locate
+
+    rng = np.random.default_rng(13)
+    found = 0
+    for _ in range(60):
+        rotation = facing_wall(float(rng.uniform(-30, 30)))
+        centre = np.array([-2.0, 0.0, 1.0]) + rng.normal(0, 0.3, 3)
+        count = int(rng.integers(8, 60))
+        points = centre + (rng.uniform([-1, -0.6, 1.0], [1, 0.6, 3.0], (count, 3)) @ rotation.T)
+        pixels, _ = project(points, centre, rotation, INTRINSICS)
+        pixels = pixels + rng.normal(0, 0.8, pixels.shape)
+        wrong = rng.random(count) < rng.uniform(0.0, 0.6)  # outliers: matched to the wrong place
+        pixels[wrong] += rng.uniform(-60, 60, (int(wrong.sum()), 2))
+        # points behind the camera on their pixel's ray (seen at that pixel, but from behind) ...
+        behind = rng.random(count) < 0.2
+        points[behind] = 2 * centre - points[behind]
+        # ... and pairs of points on one ray, whose two rays fix no centre
+        twins = rng.random(count) < 0.3
+        points[twins] = centre + 1.5 * (points[np.roll(twins, 1)][: int(twins.sum())] - centre)
+        pixels[twins] = pixels[np.roll(twins, 1)][: int(twins.sum())]
+        params = RelocalisationParams(ransac_iterations=int(rng.integers(1, 80)))
+        seed = int(rng.integers(0, 1 << 30))
+        ours = locate(points, pixels, rotation, INTRINSICS, params, np.random.default_rng(seed))
+        literal = literal_locate(points, pixels, rotation, INTRINSICS, params, np.random.default_rng(seed))
+        assert (ours is None) == (literal is None)
+        if ours is not None:
+            found += 1
+            assert ours[1].tolist() == literal[1].tolist()
+            np.testing.assert_allclose(ours[0], literal[0], atol=1e-9)
+    assert found > 20
+
+
+def test_locate_keeps_the_first_of_two_equally_good_hypotheses_as_the_literal_ransac_does():
+    """Two groups of as many matches, each consistent with a centre of its own (a repeated structure):
+    the hypotheses of each group have as many inliers. ``locate`` keeps the first drawn, as the literal
+    RANSAC does, whichever group that is for the random stream."""
+    from literal_relocalisation import literal_locate
+
+    rotation = facing_wall()
+    rng = np.random.default_rng(14)
+    centres = [np.array([-2.0, 0.3, 1.0]), np.array([-2.0, -0.5, 1.2])]
+    points, pixels = [], []
+    for centre in centres:
+        group = centre + rng.uniform([-1, -0.6, 1.0], [1, 0.6, 3.0], (12, 3)) @ rotation.T
+        points.append(group)
+        pixels.append(project(group, centre, rotation, INTRINSICS)[0])
+    points, pixels = np.vstack(points), np.vstack(pixels)
+    params = RelocalisationParams()
+    chosen = set()
+    for seed in range(40):
+        ours = locate(points, pixels, rotation, INTRINSICS, params, np.random.default_rng(seed))
+        literal = literal_locate(points, pixels, rotation, INTRINSICS, params, np.random.default_rng(seed))
+        assert ours is not None and literal is not None
+        assert ours[1].tolist() == literal[1].tolist()
+        chosen.add(int(np.argmin([np.linalg.norm(ours[0] - c) for c in centres])))
+    assert chosen == {0, 1}  # the stream decides which group wins: the order matters

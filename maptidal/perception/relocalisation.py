@@ -20,8 +20,10 @@ localised for a whole mission, where frame-to-frame odometry drifts without boun
   ``(I - b b^T)(X - c) = 0`` for the ray's unit world bearing ``b``. Two matches fix the centre; RANSAC
   over pairs keeps the matches that reproject within ``reprojection_px``, and the centre is the least
   squares solution over them, ``c = (sum P_i)^-1 sum P_i X_i`` with ``P_i = I - b_i b_i^T`` (tested
-  against a brute-force search). A planar wall, which lets six-degree-of-freedom PnP trade rotation
-  for translation, cannot fool a solve that knows the rotation.
+  against a brute-force search). Every hypothesis is solved and scored at once, the pairs drawn one at a
+  time, so that a random stream gives the same fix as hypothesis by hypothesis. A planar wall, which
+  lets six-degree-of-freedom PnP trade rotation for translation, cannot fool a solve that knows the
+  rotation.
 - **Refusals.** A fix needs ``min_inliers`` inliers, a well-conditioned geometry (the rays' spread,
   ``min_ray_spread``), a centre within ``max_correction_m`` of the prediction and, as a Kalman filter
   gates an innovation, within ``gate`` standard deviations of it (the prediction's and the fix's
@@ -231,15 +233,18 @@ def locate(
     if n < max(params.min_inliers, 2):
         return None
     rays = bearings(pixels, rotation, intrinsics)
+    # every hypothesis at once (the pairs drawn as one at a time, so that the same random stream gives
+    # the same pairs): the same centres, inliers and choice as hypothesis by hypothesis, to the bit
+    pairs = np.array([rng.choice(n, 2, replace=False) for _ in range(params.ransac_iterations)])
+    projectors = np.eye(3)[None, None] - rays[pairs][..., :, None] * rays[pairs][..., None, :]
+    normals = projectors.sum(axis=1)
+    fixed = np.flatnonzero(~(np.linalg.cond(normals) > 1e8))  # centre_from_rays' refusal
     best: np.ndarray | None = None
-    for _ in range(params.ransac_iterations):
-        pair = rng.choice(n, 2, replace=False)
-        centre = centre_from_rays(points[pair], rays[pair])
-        if centre is None:
-            continue
-        inliers = _inliers(points, pixels, centre, rotation, intrinsics, params.reprojection_px)
-        if best is None or inliers.sum() > best.sum():
-            best = inliers
+    if len(fixed):
+        right = np.einsum("bnij,bnj->bi", projectors[fixed], points[pairs[fixed]])
+        centres = np.linalg.solve(normals[fixed], right[..., None])[..., 0]
+        inliers = _inliers_of_each(points, pixels, centres, rotation, intrinsics, params.reprojection_px)
+        best = inliers[int(np.argmax(inliers.sum(axis=1)))]  # the first of the most inliers
     if best is None or best.sum() < max(params.min_inliers, params.min_inlier_ratio * n):
         return None
     centre = None
@@ -257,6 +262,18 @@ def locate(
 def _inliers(points, pixels, centre, rotation, intrinsics, threshold_px: float) -> np.ndarray:
     projected, depth = project(points, centre, rotation, intrinsics)
     error = np.linalg.norm(projected - pixels, axis=1)
+    return (depth > 0) & (error <= threshold_px)
+
+
+def _inliers_of_each(points, pixels, centres, rotation, intrinsics, threshold_px: float) -> np.ndarray:
+    """:func:`_inliers` of each of ``centres`` ``(B, 3)``: a mask ``(B, N)``."""
+    pixels = np.asarray(pixels, float)
+    camera = (np.asarray(points, float)[None] - centres[:, None]) @ np.asarray(rotation, float)
+    depth = camera[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = intrinsics.fx * camera[..., 0] / depth + intrinsics.cx
+        v = intrinsics.fy * camera[..., 1] / depth + intrinsics.cy
+    error = np.linalg.norm(np.stack([u, v], axis=-1) - pixels[None], axis=2)
     return (depth > 0) & (error <= threshold_px)
 
 

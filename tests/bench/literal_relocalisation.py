@@ -46,3 +46,60 @@ def literal_match(anchors, pose, pixels, descriptors, valid, sigma_m: float) -> 
             taken[index] = (distance, row)
     matched = sorted(taken)
     return [taken[index][1] for index in matched], matched
+
+
+def literal_locate(points, pixels, rotation, intrinsics, params, rng):
+    """The camera centre by RANSAC over pairs of rays, one hypothesis at a time, each solved by least
+    squares over the stacked perpendicular projections (``numpy.linalg.lstsq``): (centre, inlier
+    mask), or None. Draws its pairs from ``rng`` as ``locate`` does, one ``choice`` per hypothesis."""
+    points = np.asarray(points, float)
+    pixels = np.asarray(pixels, float)
+    n = len(points)
+    if n < max(params.min_inliers, 2):
+        return None
+    rays = []
+    for u, v in pixels:
+        ray = rotation @ np.array(
+            [(u - intrinsics.cx) / intrinsics.fx, (v - intrinsics.cy) / intrinsics.fy, 1.0]
+        )
+        rays.append(ray / math.sqrt(ray @ ray))
+    rays = np.array(rays)
+
+    def centre_of(rows):
+        blocks = [np.eye(3) - np.outer(rays[i], rays[i]) for i in rows]
+        if np.linalg.cond(sum(blocks)) > 1e8:
+            return None
+        stacked = np.vstack(blocks)
+        target = np.concatenate([block @ points[i] for block, i in zip(blocks, rows, strict=True)])
+        return np.linalg.lstsq(stacked, target, rcond=None)[0]
+
+    def inliers_of(centre):
+        mask = np.zeros(n, bool)
+        for i in range(n):
+            x, y, z = (points[i] - centre) @ rotation
+            if z > 0:
+                u, v = intrinsics.fx * x / z + intrinsics.cx, intrinsics.fy * y / z + intrinsics.cy
+                mask[i] = math.hypot(u - pixels[i][0], v - pixels[i][1]) <= params.reprojection_px
+        return mask
+
+    best = None
+    for _ in range(params.ransac_iterations):
+        pair = rng.choice(n, 2, replace=False)
+        centre = centre_of(pair.tolist())
+        if centre is None:
+            continue
+        mask = inliers_of(centre)
+        if best is None or mask.sum() > best.sum():
+            best = mask
+    if best is None or best.sum() < max(params.min_inliers, params.min_inlier_ratio * n):
+        return None
+    centre = None
+    for _ in range(2):
+        centre = centre_of(np.flatnonzero(best).tolist())
+        if centre is None:
+            return None
+        refined = inliers_of(centre)
+        if refined.sum() < params.min_inliers:
+            return None
+        best = refined
+    return centre, best

@@ -90,6 +90,8 @@ PUSH_TESTS = ["tests/test_unmodelled_motion.py"]
 SEARCH_MATCH_TESTS = [
     "tests/test_relocalisation.py::test_the_guided_match_is_the_literal_anchor_by_anchor_one",
     "tests/test_relocalisation.py::test_a_search_with_the_distances_worked_out_once_matches_as_keypoint_by_keypoint",
+    "tests/test_relocalisation.py::test_locate_is_the_literal_ransac_hypothesis_by_hypothesis",
+    "tests/test_relocalisation.py::test_locate_keeps_the_first_of_two_equally_good_hypotheses_as_the_literal_ransac_does",
 ]
 HAND_OVER_TESTS = [
     "tests/test_localisation_loop.py::test_a_robot_lost_on_its_way_hands_the_view_to_a_teammate_with_nothing_left_to_do",
@@ -2062,6 +2064,56 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "maptidal/perception/relocalisation.py",
                 "distances[row] = descriptor_distances(self.descriptors, descriptors[row][None])",
                 "distances[row] = descriptor_distances(self.descriptors, descriptors[0][None])",
+            )
+        ],
+    ),
+    "G5": (
+        "RANSAC keeps the last hypothesis of the most inliers",
+        [
+            (
+                "maptidal/perception/relocalisation.py",
+                "best = inliers[int(np.argmax(inliers.sum(axis=1)))]",
+                "best = inliers[len(inliers) - 1 - int(np.argmax(inliers.sum(axis=1)[::-1]))]",
+            )
+        ],
+    ),
+    "G6": (
+        "RANSAC takes the first hypothesis",
+        [
+            (
+                "maptidal/perception/relocalisation.py",
+                "best = inliers[int(np.argmax(inliers.sum(axis=1)))]",
+                "best = inliers[0]",
+            )
+        ],
+    ),
+    "G7": (
+        "two parallel rays taken to fix a centre",
+        [
+            (
+                "maptidal/perception/relocalisation.py",
+                "fixed = np.flatnonzero(~(np.linalg.cond(normals) > 1e8))",
+                "fixed = np.arange(len(normals))",
+            )
+        ],
+    ),
+    "G8": (
+        "a point behind the camera counted as an inlier",
+        [
+            (
+                "maptidal/perception/relocalisation.py",
+                "axis=2)\n    return (depth > 0) & (error <= threshold_px)\n",
+                "axis=2)\n    return error <= threshold_px\n",
+            )
+        ],
+    ),
+    "G9": (
+        "each hypothesis's second point taken for its first",
+        [
+            (
+                "maptidal/perception/relocalisation.py",
+                'right = np.einsum("bnij,bnj->bi", projectors[fixed], points[pairs[fixed]])',
+                'right = np.einsum("bnij,bnj->bi", projectors[fixed], points[pairs[fixed]][:, ::-1])',
             )
         ],
     ),
