@@ -236,7 +236,8 @@ def locate(
     # every hypothesis at once (the pairs drawn as one at a time, so that the same random stream gives
     # the same pairs): the same centres, inliers and choice as hypothesis by hypothesis, to the bit
     pairs = np.array([rng.choice(n, 2, replace=False) for _ in range(params.ransac_iterations)])
-    projectors = np.eye(3)[None, None] - rays[pairs][..., :, None] * rays[pairs][..., None, :]
+    paired = rays[pairs]  # (hypotheses, 2, 3)
+    projectors = np.eye(3)[None, None] - paired[..., :, None] * paired[..., None, :]
     normals = projectors.sum(axis=1)
     fixed = np.flatnonzero(~(np.linalg.cond(normals) > 1e8))  # centre_from_rays' refusal
     best: np.ndarray | None = None
@@ -260,13 +261,15 @@ def locate(
 
 
 def _inliers(points, pixels, centre, rotation, intrinsics, threshold_px: float) -> np.ndarray:
-    projected, depth = project(points, centre, rotation, intrinsics)
-    error = np.linalg.norm(projected - pixels, axis=1)
-    return (depth > 0) & (error <= threshold_px)
+    """Which ``points`` a camera at ``centre`` sees in front of it within ``threshold_px`` of their
+    ``pixels``."""
+    return _inliers_of_each(
+        points, pixels, np.asarray(centre, float)[None], rotation, intrinsics, threshold_px
+    )[0]
 
 
 def _inliers_of_each(points, pixels, centres, rotation, intrinsics, threshold_px: float) -> np.ndarray:
-    """:func:`_inliers` of each of ``centres`` ``(B, 3)``: a mask ``(B, N)``."""
+    """:func:`_inliers` of each of ``centres`` ``(B, 3)``: a mask ``(B, N)``, every centre at once."""
     pixels = np.asarray(pixels, float)
     camera = (np.asarray(points, float)[None] - centres[:, None]) @ np.asarray(rotation, float)
     depth = camera[..., 2]
