@@ -7,6 +7,7 @@ mode, where the paper mode would have kept few of them (it keeps what the tank m
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 import pytest
@@ -389,3 +390,37 @@ def test_perception_reviews_the_path_against_the_views_taken_on_its_map():
     nothing_done = dataclasses.replace(job, existing_done=np.zeros(4, bool))
     assert _review(robot_map, nothing_done, DiscoveryParams()).tolist() == []
     assert _review(robot_map, dataclasses.replace(job, to_review=None), DiscoveryParams()).tolist() == []
+
+
+def test_a_task_counts_for_the_survey_whose_frame_found_it(tmp_path):
+    """A task found on a frame taken during a survey counts for that survey, whenever the frame's answer
+    comes (a frame later); one found on a frame before or after every survey counts for none; a survey
+    the robot left standing down is not counted at all. ``mission.json``'s ``survey_outcomes`` and the
+    report's table say so."""
+    with mission_at_rest(tmp_path, duration_s=0.5) as (mission, _):
+        robot = mission.robots["rov0"]
+        row = np.array([[-1.0, 0.0, 1.0, 1.0, 0.0, 0.0]])
+        look = np.array([[-1.0, 0.5, 1.0, 3.0, 2.0, 1.5]])
+        for start in (10.0, 100.0):
+            robot.activity, robot.survey_ended_s, robot.explored = "idle", start - 1.0, False
+            robot.frontier, robot.frontier_frame_s = look.copy(), start - 0.5
+            mission._explore(robot, start)
+            mission._advance_activity(robot, start + robot.route.duration + 0.1)
+        first_end = robot.survey_log[0]["end_s"]
+        mission._mint(robot, row, now=first_end + 0.5, frame_s=first_end - 0.5)  # answered after it ended
+        mission._mint(robot, row, now=60.0, frame_s=59.0)  # between the surveys
+        mission._mint(robot, row + [0.0, 0.3, 0.0, 0.0, 0.0, 0.0], now=5.0, frame_s=4.0)  # before both
+        assert [entry["tasks"] for entry in robot.survey_log] == [1, 0]
+        robot.activity, robot.survey_ended_s = "idle", 149.0
+        robot.frontier, robot.frontier_frame_s = look.copy(), 149.5
+        mission._explore(robot, 150.0)
+        robot.lost_at_s = 140.0
+        mission._stand_down(robot, 160.0)  # it leaves the survey: not one it flew
+        assert robot.activity == "idle" and len(robot.survey_log) == len(robot.surveyed) == 2
+        document = mission._write_final(200.0, time.perf_counter(), finished=False)
+    outcome = document["survey_outcomes"]["rov0"]
+    assert outcome["surveys"] == 2 and outcome["with_tasks"] == 1 and outcome["timed_out"] == 0
+    second = robot.survey_log[1]
+    assert outcome["seconds_without_tasks"] == pytest.approx(second["end_s"] - second["start_s"], abs=1e-3)
+    report = (tmp_path / "report.md").read_text()
+    assert "## What the surveys found" in report and "| rov0 | 2 | 1 | 0 |" in report

@@ -73,3 +73,35 @@ def test_the_batch_counts_the_teams_seconds_surveying_and_lost():
     }
     assert team_time_use(document) == {"surveying_s": 50.5, "lost_s": 52.25}
     assert team_time_use({}) == {"surveying_s": None, "lost_s": None}  # a mission recorded before it
+
+
+def test_a_robots_surveys_are_told_by_what_their_frames_found():
+    """``survey_outcomes`` counts the surveys, those that found a task, those that timed out, and the
+    seconds of all and of those that found none (one still under way ends now); the batch's
+    ``fruitless_survey_s`` sums the team's; a document without them gives None."""
+    from maptidal.mission.outputs import survey_outcomes, team_survey_outcomes
+
+    log = [
+        {"start_s": 10.0, "end_s": 40.0, "timed_out": False, "tasks": 2},
+        {"start_s": 50.0, "end_s": 110.0, "timed_out": True, "tasks": 0},
+        {"start_s": 120.0, "end_s": 150.5, "timed_out": False, "tasks": 0},
+        {"start_s": 200.0, "end_s": None, "timed_out": False, "tasks": 0},
+    ]
+    outcome = survey_outcomes(log, now=212.0)
+    assert outcome == {
+        "surveys": 4,
+        "with_tasks": 1,
+        "timed_out": 1,
+        "seconds": 30.0 + 60.0 + 30.5 + 12.0,
+        "seconds_without_tasks": 60.0 + 30.5 + 12.0,
+    }
+    assert survey_outcomes([], now=5.0) == {
+        "surveys": 0,
+        "with_tasks": 0,
+        "timed_out": 0,
+        "seconds": 0.0,
+        "seconds_without_tasks": 0.0,
+    }
+    document = {"survey_outcomes": {"rov0": outcome, "rov1": survey_outcomes(log[:1], 50.0)}}
+    assert team_survey_outcomes(document) == {"fruitless_survey_s": 102.5}
+    assert team_survey_outcomes({}) == {"fruitless_survey_s": None}

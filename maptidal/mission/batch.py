@@ -58,6 +58,7 @@ METRICS = {
     "thruster_energy_kj": "kJ drawn by the team's thrusters (T200 power law)",
     "contact_s": "robot-seconds touching the tank or a teammate",
     "surveying_s": "robot-seconds surveying the map's frontier",
+    "fruitless_survey_s": "robot-seconds on surveys whose frames found no task",
     "lost_s": "robot-seconds lost (no visual fix, or too unsure)",
     "messages": "messages",
     "bytes": "bytes",

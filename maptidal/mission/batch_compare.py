@@ -54,6 +54,7 @@ COMPARED = {
     "thruster_energy_kj": "thruster energy (kJ)",
     "contact_s": "contact (robot-s)",
     "surveying_s": "surveying (robot-s)",
+    "fruitless_survey_s": "surveys finding no task (robot-s)",
     "lost_s": "lost (robot-s)",
     "bytes": "bytes sent",
 }

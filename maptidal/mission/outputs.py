@@ -438,6 +438,7 @@ def mission_metrics(document: dict) -> dict:
         "time_to_95_s": time_to_coverage(document.get("coverage_timeline", []), 95.0),
         **team_odometry(document),  # path_m, thruster_energy_kj, contact_s
         **team_time_use(document),  # surveying_s, lost_s
+        **team_survey_outcomes(document),  # fruitless_survey_s
         "messages": None if comms is None else int(comms.get("messages", 0)),
         "bytes": None if comms is None else int(comms.get("bytes", 0)),
         "lost": None if comms is None else int(comms.get("lost", 0)),
@@ -450,6 +451,32 @@ def mission_metrics(document: dict) -> dict:
             else sum(row["lost"] for row in document["tasks_lost"].values())
         ),
     }
+
+
+def survey_outcomes(log: list[dict], now: float) -> dict:
+    """What a robot's surveys gave, from its log of them (each ``start_s``, ``end_s``, None while under
+    way, which ``now`` ends, ``timed_out`` and ``tasks``, the tasks found on the frames it took): how many
+    it flew, how many found a task, how many ran out their timeout, and the seconds they took, all told
+    and those of the ones that found none."""
+    seconds = [(entry["end_s"] if entry["end_s"] is not None else now) - entry["start_s"] for entry in log]
+    return {
+        "surveys": len(log),
+        "with_tasks": sum(1 for entry in log if entry["tasks"] > 0),
+        "timed_out": sum(1 for entry in log if entry["timed_out"]),
+        "seconds": round(sum(seconds), 3),
+        "seconds_without_tasks": round(
+            sum(s for s, entry in zip(seconds, log, strict=True) if entry["tasks"] == 0), 3
+        ),
+    }
+
+
+def team_survey_outcomes(document: dict) -> dict:
+    """The team's robot-seconds on surveys that found no task (``fruitless_survey_s``), from
+    ``mission.json``'s ``survey_outcomes``; None for a document without it."""
+    outcomes = document.get("survey_outcomes")
+    if outcomes is None:
+        return {"fruitless_survey_s": None}
+    return {"fruitless_survey_s": round(sum(row["seconds_without_tasks"] for row in outcomes.values()), 3)}
 
 
 def team_time_use(document: dict) -> dict:
@@ -483,6 +510,30 @@ def time_use_lines(document: dict) -> list[str]:
     ]
 
 
+def survey_lines(document: dict) -> list[str]:
+    """``report.md``'s table of what each robot's surveys gave (``survey_outcomes``); none for a
+    document without surveys."""
+    outcomes = document.get("survey_outcomes") or {}
+    if not any(row["surveys"] for row in outcomes.values()):
+        return []
+    rows = [
+        f"| {name} | {row['surveys']} | {row['with_tasks']} | {row['timed_out']} | {row['seconds']:.0f} | "
+        f"{row['seconds_without_tasks']:.0f} |"
+        for name, row in outcomes.items()
+    ]
+    return [
+        "## What the surveys found",
+        "",
+        "Each robot's surveys of its map's frontier, those whose frames found a task, those that ran out "
+        "their timeout, and the simulated seconds of all of them and of those that found none.",
+        "",
+        "| robot | surveys | found a task | timed out | seconds | seconds finding none |",
+        "|---|---|---|---|---|---|",
+        *rows,
+        "",
+    ]
+
+
 def report_markdown(document: dict) -> str:
     """``report.md``: the summary table and the plots."""
     m = mission_metrics(document)
@@ -506,6 +557,7 @@ def report_markdown(document: dict) -> str:
         *sharing_lines(document),
         *localisation_lines(document),
         *time_use_lines(document),
+        *survey_lines(document),
         *timing_lines(document),
         *(
             [

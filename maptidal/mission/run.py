@@ -72,7 +72,7 @@ from maptidal.exploration import FrontierParams
 from maptidal.map_discovery import MapAwareParams, RobotMap, check_box
 from maptidal.mission.capture import camera_pose_from_body
 from maptidal.mission.clearance import waiting_point
-from maptidal.mission.outputs import MissionWriter
+from maptidal.mission.outputs import MissionWriter, survey_outcomes
 from maptidal.mission.perception import ExploreRequest, FrameJob, FrameResult, start_perception
 from maptidal.mission.routes import survey_route, sweep_legs
 from maptidal.mission.sharing import sharing_table, tasks_lost
@@ -514,6 +514,8 @@ class _Robot:
     frontier_frame_s: float = -math.inf
     frontier_held: int = 0  # with no look left: how many were left out for being near a teammate
     surveyed: list = field(default_factory=list)
+    # each survey's span and the tasks found on its frames (:func:`maptidal.mission.outputs.survey_outcomes`)
+    survey_log: list = field(default_factory=list)
     time_use: TimeUse = field(default_factory=TimeUse)  # where its mission time went
     survey_ended_s: float = -math.inf
     has_dvl: bool = True
@@ -827,6 +829,7 @@ class Mission:
         left = robot.activity
         if left == "survey":
             robot.surveyed.pop()
+            robot.survey_log.pop()
             robot.survey_ended_s, robot.frontier = now, None
         if left in ("fly", "survey"):
             robot.activity = "idle"
@@ -1339,6 +1342,9 @@ class Mission:
         """Mint task rows ``(N, 6)`` the robot found into its CBBA agent, the ledger and the event log
         (``gap``: views of its map's gaps, :func:`maptidal.map_discovery.gap_views`)."""
         agent = self.auction.agents[robot.index]
+        for survey in robot.survey_log:
+            if survey["start_s"] <= frame_s <= (survey["end_s"] if survey["end_s"] is not None else now):
+                survey["tasks"] += len(rows)  # found on a frame the survey took
         for row in rows:
             task = agent.discover_task(row[:3], row[3:], now_s=now)
             self._ledger(task, robot.name, now)
@@ -1368,6 +1374,7 @@ class Mission:
             if now - robot.route_start_s >= robot.route.duration or timed_out:
                 robot.activity = "idle"
                 robot.survey_ended_s, robot.frontier = now, None
+                robot.survey_log[-1].update(end_s=now, timed_out=timed_out)
                 self.writer.event(now, "surveyed", robot=robot.name, timed_out=timed_out)
             return
         if robot.activity == "idle":
@@ -1531,6 +1538,7 @@ class Mission:
         robot.goal, robot.view = None, None
         robot.route_start_s, robot.task_started_s = now, now
         robot.surveyed.append(look)
+        robot.survey_log.append({"start_s": now, "end_s": None, "timed_out": False, "tasks": 0})
         robot.activity = "survey"
         self.writer.event(
             now,
@@ -1692,6 +1700,8 @@ class Mission:
             },
             # the places each robot flew to to look at its map's frontier (MissionParams.explore)
             "surveys": {r.name: len(r.surveyed) for r in self.robots.values()},
+            # how many of them found a task on their frames, and the seconds of those that found none
+            "survey_outcomes": {r.name: survey_outcomes(r.survey_log, now) for r in self.robots.values()},
             # where each robot's time went: seconds per occupation, and its spans (time_use)
             "time_use": {r.name: r.time_use.as_dict(now) for r in self.robots.values()},
             "comms": {

@@ -73,6 +73,7 @@ EXPLORE_TESTS = [
 TIME_USE_TESTS = [
     "tests/test_time_use.py",
     "tests/test_mission.py::test_each_robots_time_is_told_by_occupation_period_by_period",
+    "tests/test_loop_discovery.py::test_a_task_counts_for_the_survey_whose_frame_found_it",
 ]
 STAND_DOWN_TESTS = [
     "tests/test_allocation.py::test_a_robot_standing_down_leaves_its_tasks_to_the_team_until_it_resumes",
@@ -1753,6 +1754,30 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 'f"{kind}_s": round(sum(row["seconds"].get("surveying", 0.0) for row in use.values()), 3)',
             )
         ],
+    ),
+    "U4": (
+        "a task counted for the survey under way when the frame's answer came, not when it was taken",
+        [
+            (
+                "maptidal/mission/run.py",
+                'if survey["start_s"] <= frame_s <= (',
+                'if survey["start_s"] <= now <= (',
+            )
+        ],
+    ),
+    "U5": (
+        "a survey's seconds counted as finding none whatever it found",
+        [
+            (
+                "maptidal/mission/outputs.py",
+                'zip(seconds, log, strict=True) if entry["tasks"] == 0',
+                "zip(seconds, log, strict=True)",
+            )
+        ],
+    ),
+    "U6": (
+        "a survey left standing down still counted",
+        [("maptidal/mission/run.py", "            robot.survey_log.pop()\n", "")],
     ),
     "Y8": (
         "a robot without a DVL surveys with survey_without_dvl off",
