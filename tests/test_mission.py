@@ -515,16 +515,32 @@ def test_a_link_outage_drops_every_message_in_its_window(tmp_path):
     )
 
 
-def test_video_has_a_frame_every_half_simulated_second(tmp_path):
+def test_video_has_a_frame_every_half_simulated_second(tmp_path, monkeypatch):
     """--video: mission.mp4 at the asked size, two frames per simulated second, readable by OpenCV, and no
-    partial file left; the frames change as the robots move."""
+    partial file left; the frames change as the robots move. Every frame is drawn on the mission's
+    drawing thread, where its cameras are drawn, never beside them on the physics' thread (two threads
+    drawing at once crashed Mesa's EGL)."""
     import dataclasses
+    import threading
 
     import cv2
 
+    from maptidal.mission import video as video_module
+
+    drawn_on = []
+
+    def recording(*args, **kwargs):
+        drawn_on.append(threading.current_thread().name)
+        return third_person_frame(*args, **kwargs)
+
+    third_person_frame = video_module.third_person_frame
+    monkeypatch.setattr(video_module, "third_person_frame", recording)
+    monkeypatch.setenv("MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
     scenario, _ = load_mission(None)
     params = dataclasses.replace(MissionParams(duration_s=6.0, seed=0), video=True, video_size=(320, 200))
     document = Mission(scenario, params, tmp_path).run()
+    expected = "MainThread" if os.environ["MUJOCO_GL"] == "glfw" else "maptidal-gl"
+    assert len(drawn_on) == 13 and all(name.startswith(expected) for name in drawn_on), drawn_on
     capture = cv2.VideoCapture(str(tmp_path / "mission.mp4"))
     frames = []
     while True:

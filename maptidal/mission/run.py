@@ -779,6 +779,12 @@ class Mission:
         self.seen = SeenVoxels(CoverageModel.from_tank(self.scenario.tank, CoverageParams(occlusion=True)))
 
     # ----- helpers ------------------------------------------------------------------------------
+    @property
+    def drawing(self):
+        """The executor every drawing of the mission runs on, one at a time (the cameras, the captures,
+        the video): a thread of its own, or the caller's where GL contexts may not move off it."""
+        return self._gl
+
     def _limits(self) -> MotionLimits:
         rate = math.radians(self.params.yaw_rate_deg_s)
         return MotionLimits(

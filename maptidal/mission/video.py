@@ -27,6 +27,8 @@ class FilmedMission(Protocol):
     robots: dict
     intrinsics: Any
     tasks: dict
+    # the executor the mission's cameras are drawn on: the video draws there too, never beside them
+    drawing: Any
 
     def inspected_pct(self) -> float: ...
 
@@ -44,14 +46,16 @@ class MissionVideo:
         self.every_s = 1.0 / params.video_frames_per_sim_s
         self.next_s = 0.0
         width, height = params.video_size
-        self.renderer = mujoco.Renderer(mission.sim.model, height, width)
+        # all of the mission's drawing is on its one drawing thread: a second thread drawing at the same
+        # time as the cameras crashed Mesa's EGL (a segmentation fault in a test run with two workers)
+        self.renderer = mission.drawing.submit(mujoco.Renderer, mission.sim.model, height, width).result()
         self.path = mission.writer.root / "mission.mp4"
         self.partial = self.path.with_name("mission.part.mp4")  # OpenCV picks the container by extension
         self.writer = cv2.VideoWriter(
             str(self.partial), cv2.VideoWriter_fourcc(*"mp4v"), params.video_playback_fps, (width, height)
         )
         if not self.writer.isOpened():
-            self.renderer.close()
+            mission.drawing.submit(self.renderer.close).result()
             raise RuntimeError("this OpenCV build cannot write MP4 (mp4v) video")
         self.frames = 0
         self.closed = False
@@ -69,9 +73,16 @@ class MissionVideo:
         centre = np.mean([mission.sim.ground_truth(name)["position"] for name in live], axis=0)
         blank = np.zeros((mission.intrinsics.height, mission.intrinsics.width, 3), np.uint8)
         insets = {r.name: r.last_left if r.last_left is not None else blank for r in mission.robots.values()}
-        frame = third_person_frame(
-            mission.sim, self.renderer, names, overview_camera(centre), insets, labels=True
-        )
+        # drawn on the drawing thread while this one waits: the physics holds still meanwhile
+        frame = mission.drawing.submit(
+            third_person_frame,
+            mission.sim,
+            self.renderer,
+            names,
+            overview_camera(centre),
+            insets,
+            labels=True,
+        ).result()
         done = sum(1 for t in mission.tasks.values() if t["completed"])
         inspected = mission.inspected_pct()
         text = f"t = {now:5.1f} s   tasks {done}/{len(mission.tasks)} done   {inspected:.0f} % inspected"
@@ -83,7 +94,7 @@ class MissionVideo:
     def close(self) -> None:
         """Finish the file and give it its name."""
         self.writer.release()
-        self.renderer.close()
+        self.mission.drawing.submit(self.renderer.close).result()
         self.partial.replace(self.path)
         self.closed = True
 
@@ -94,5 +105,5 @@ class MissionVideo:
         if self.closed:
             return
         self.writer.release()
-        self.renderer.close()
+        self.mission.drawing.submit(self.renderer.close).result()
         self.closed = True
