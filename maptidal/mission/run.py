@@ -780,7 +780,7 @@ class Mission:
 
     # ----- helpers ------------------------------------------------------------------------------
     @property
-    def drawing(self):
+    def drawing(self) -> ThreadPoolExecutor | _SameThread:
         """The executor every drawing of the mission runs on, one at a time (the cameras, the captures,
         the video): a thread of its own, or the caller's where GL contexts may not move off it."""
         return self._gl
