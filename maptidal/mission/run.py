@@ -508,13 +508,12 @@ class _Robot:
     # to them; MissionParams.retire_taken)
     covered: set = field(default_factory=set)
     # exploration (MissionParams.explore): its latest next looks and the time of the frame they were
-    # worked out on; the places it surveyed; when its last survey ended (a look from an older frame is
-    # stale: it was worked out before that survey's views)
+    # worked out on; its surveys, each its look (where it stood), its span and the tasks found on its
+    # frames (:func:`maptidal.mission.outputs.survey_outcomes`); when its last survey ended (a look from
+    # an older frame is stale: it was worked out before that survey's views)
     frontier: np.ndarray | None = None
     frontier_frame_s: float = -math.inf
     frontier_held: int = 0  # with no look left: how many were left out for being near a teammate
-    surveyed: list = field(default_factory=list)
-    # each survey's span and the tasks found on its frames (:func:`maptidal.mission.outputs.survey_outcomes`)
     survey_log: list = field(default_factory=list)
     time_use: TimeUse = field(default_factory=TimeUse)  # where its mission time went
     survey_ended_s: float = -math.inf
@@ -553,6 +552,11 @@ class _Robot:
     def active(self) -> bool:
         """In the mission now: neither waiting to join nor failed."""
         return self.activity not in ("waiting", "failed")
+
+    @property
+    def surveyed(self) -> list[np.ndarray]:
+        """The places it surveyed (each survey's look), in order."""
+        return [entry["look"] for entry in self.survey_log]
 
 
 def _can_pitch(vehicle) -> bool:
@@ -834,7 +838,6 @@ class Mission:
             return
         left = robot.activity
         if left == "survey":
-            robot.surveyed.pop()
             robot.survey_log.pop()
             robot.survey_ended_s, robot.frontier = now, None
         if left in ("fly", "survey"):
@@ -1543,8 +1546,7 @@ class Mission:
         robot.route = survey_route(estimate.position.copy(), estimate.yaw, look, yaw, sweep, self._limits())
         robot.goal, robot.view = None, None
         robot.route_start_s, robot.task_started_s = now, now
-        robot.surveyed.append(look)
-        robot.survey_log.append({"start_s": now, "end_s": None, "timed_out": False, "tasks": 0})
+        robot.survey_log.append({"look": look, "start_s": now, "end_s": None, "timed_out": False, "tasks": 0})
         robot.activity = "survey"
         self.writer.event(
             now,
