@@ -242,6 +242,24 @@ def tank_config_from_dict(document: dict) -> TankConfig:
         raise TankConfigError(f"bad tank config: {err}") from None
 
 
+def tank_config_to_dict(config: TankConfig) -> dict:
+    """The tank config as the TOML document :func:`tank_config_from_dict` reads (the two round-trip), for
+    a mission's event log: its report is rebuilt on the tank it was flown in."""
+    side = {"length": config.side_length, "evaluated_length": config.side_evaluated_length}
+    if config.side_baseline_length is not None:
+        side["baseline_length"] = config.side_baseline_length
+    return {
+        "name": config.name,
+        "water_depth": config.water_depth,
+        "end_wall": {"width": config.end_wall_width},
+        "angled_walls": {"length": config.angled_length, "angle_deg": config.angled_angle_deg},
+        "side_walls": side,
+        "window": dataclasses.asdict(config.window),
+        "ladder": dataclasses.asdict(config.ladder),
+        "fouling": [dataclasses.asdict(patch) for patch in config.fouling],
+    }
+
+
 def load_tank_config(path: str | Path | None = None) -> TankConfig:
     """Read and validate a tank config (TOML); ``None`` loads the default OSB tank."""
     path = Path(path) if path is not None else DEFAULT_TANK_CONFIG

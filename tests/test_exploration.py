@@ -87,16 +87,19 @@ def test_a_stand_is_clear_when_every_voxel_within_the_radius_is_free(radius):
         assert clear[i, j, k] == ok, (i, j, k)
 
 
-def _literal_gain(grid: VoxelStates, position, yaw, params: FrontierParams) -> float:
-    """One look's unknown volume, ray by ray and sample by sample, as the docstring says."""
+def _literal_gain(grid: VoxelStates, position, yaw, params: FrontierParams, pitch: float = 0.0) -> float:
+    """One look's unknown volume, ray by ray and sample by sample, as the docstring says; the camera's
+    axes written out for a heading ``yaw`` and a pitch ``pitch`` (nose down +)."""
     seen = set()
     tan_h = math.tan(math.radians(params.hfov_deg) / 2)
     tan_v = math.tan(math.radians(params.vfov_deg) / 2)
+    cy, sy, cp, sp = math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch)
+    forward = np.array([cp * cy, cp * sy, -sp])
+    left = np.array([-sy, cy, 0.0])
+    up = np.array([sp * cy, sp * sy, cp])
     for a in np.linspace(-tan_h, tan_h, params.rays_across):
         for u in np.linspace(-tan_v, tan_v, params.rays_up):
-            forward = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-            left = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
-            ray = forward + a * left + u * np.array([0.0, 0.0, 1.0])
+            ray = forward + a * left + u * up
             ray /= np.linalg.norm(ray)
             depth = 0.5 * grid.size
             while depth <= params.view_range_m + 1e-9:
@@ -112,21 +115,23 @@ def _literal_gain(grid: VoxelStates, position, yaw, params: FrontierParams) -> f
     return len(seen) * grid.size**3
 
 
+@pytest.mark.parametrize("pitch_deg", [0.0, 27.0, -40.0])
 @pytest.mark.parametrize("gain_box", [None, ((-1.0, -0.5, -2.0), (1.5, 2.5, 0.5))])
 @pytest.mark.parametrize("seed", range(3))
-def test_a_looks_gain_is_the_unknown_volume_its_rays_reach_before_a_surface(seed, gain_box):
+def test_a_looks_gain_is_the_unknown_volume_its_rays_reach_before_a_surface(seed, gain_box, pitch_deg):
     rng = np.random.default_rng(seed)
     states = rng.choice([UNKNOWN, FREE, LOOKED, OCCUPIED], p=[0.45, 0.35, 0.15, 0.05], size=(30, 30, 20))
     grid = VoxelStates(states.astype(np.int8), np.array([-15, -15, -10]), VOXEL, gain_box)
     params = FrontierParams(view_range_m=1.5, rays_across=4, rays_up=3)
     positions = rng.uniform(-0.8, 0.8, size=(3, 3))
     yaws = np.array([0.3, 2.0, -2.5])
-    gains = look_gains(grid, positions, yaws, params)
+    pitch = math.radians(pitch_deg)
+    gains = look_gains(grid, positions, yaws, params, pitch)
     for n, position in enumerate(positions):
         for y, yaw in enumerate(yaws):
-            assert gains[n, y] == pytest.approx(_literal_gain(grid, position, yaw, params), rel=1e-9)
+            assert gains[n, y] == pytest.approx(_literal_gain(grid, position, yaw, params, pitch), rel=1e-9)
     if gain_box is not None:  # the box leaves some unknown voxels out
-        everywhere = look_gains(dataclasses.replace(grid, gain_box=None), positions, yaws, params)
+        everywhere = look_gains(dataclasses.replace(grid, gain_box=None), positions, yaws, params, pitch)
         assert (gains <= everywhere).all() and (gains < everywhere).any()
 
 
@@ -160,11 +165,12 @@ def test_a_robot_that_looked_one_way_is_sent_to_look_the_other_way():
     best = views[0]
     facing = np.array([math.cos(best[3]), math.sin(best[3])])
     assert facing[0] < -0.5, best  # towards the half it has not seen
-    assert best[4] >= FrontierParams().min_gain_m3
+    assert best[5] >= FrontierParams().min_gain_m3
+    assert (views[:, 4] == 0).all()  # level looks alone by default
     # utility is the gain discounted by the distance to fly; the rows are best first
     distance = np.linalg.norm(views[:, :3] - camera, axis=1)
-    assert views[:, 5] == pytest.approx(views[:, 4] * np.exp(-distance / FrontierParams().distance_scale_m))
-    assert np.all(np.diff(views[:, 5]) <= 1e-12)
+    assert views[:, 6] == pytest.approx(views[:, 5] * np.exp(-distance / FrontierParams().distance_scale_m))
+    assert np.all(np.diff(views[:, 6]) <= 1e-12)
     # every look stands in water the robot has seen, clear of the map and of the surface
     assert robot_map.seen_free(views[:, :3]).all()
     nearest = np.min(np.linalg.norm(views[:, None, :3] - robot_map.points()[None], axis=2), axis=1)
@@ -268,17 +274,17 @@ def test_a_look_is_worth_only_what_it_reveals_of_the_gain_box():
     views = explore_views(robot_map, camera, params, launch=camera)
     assert len(views) and (np.cos(views[:, 3]) > -1e-9).all()
     grid = voxel_states(robot_map, params, camera, pad_m=params.view_range_m)
-    for x, y, z, yaw, gain, _ in views:
+    for x, y, z, yaw, _pitch, gain, _ in views:
         # within two voxels: the gain's rays are sampled in float32, and a sample may fall on a voxel's face
         assert gain == pytest.approx(_literal_gain(grid, (x, y, z), yaw, params), abs=2 * VOXEL**3)
-        assert params.min_gain_m3 <= gain < everywhere[0, 4]
+        assert params.min_gain_m3 <= gain < everywhere[0, 5]
 
 
 def test_an_empty_or_lost_map_gives_no_look():
-    assert explore_views(RobotMap(), np.zeros(3)).shape == (0, 6)
+    assert explore_views(RobotMap(), np.zeros(3)).shape == (0, 7)
     robot_map = RobotMap()
     _look(robot_map, np.array([-0.5, 0.0, 1.0]), 0.0, _room())
-    assert explore_views(robot_map, np.array([np.nan, 0.0, 1.0])).shape == (0, 6)
+    assert explore_views(robot_map, np.array([np.nan, 0.0, 1.0])).shape == (0, 7)
 
 
 @pytest.mark.parametrize(
@@ -321,3 +327,49 @@ def test_a_look_stands_over_water_seen_beneath_it_where_the_floor_has_few_landma
     without = dataclasses.replace(params, floor_clearance_m=0.0)
     low = explore_views(robot_map, np.array([0.0, 0.0, 0.8]), without)
     assert views[:, 2].min() > low[:, 2].min()  # without the rule, looks stand lower
+
+
+def _shallow_room_seen_level(camera: np.ndarray) -> RobotMap:
+    """A room 4 x 4 m, 1.6 m deep, walls mapped every 0.1 m from 0.5 m up, the floor and the walls'
+    foot bare (no landmark, as a bland concrete floor at a grazing angle), seen from ``camera`` with a
+    level camera all round: the water before the walls' foot is never looked at."""
+    g, h = np.arange(-2, 2.001, 0.1), np.arange(0.5, 1.601, 0.1)
+    walls = [[s * 2, y, z] for s in (-1, 1) for y in g for z in h]
+    walls += [[x, s * 2, z] for s in (-1, 1) for x in g for z in h]
+    robot_map = RobotMap(MapAwareParams(surface_z=1.6))
+    for yaw in range(0, 360, 45):
+        _look(robot_map, camera, yaw, np.array(walls, float))
+    return robot_map
+
+
+def test_a_pitched_look_reveals_more_of_the_water_before_a_walls_foot_than_any_level_look():
+    # a robot 1 m up in a shallow room has looked level all round; the water before the walls' foot,
+    # within the box of the +x wall it was sent to inspect, is unknown. The stands its map allows are
+    # about its own height, where a level look sees that water at a grazing angle or not at all; one
+    # pitched down sees much more of it
+    camera = np.array([0.0, 0.0, 1.0])
+    robot_map = _shallow_room_seen_level(camera)
+    box = ((1.4, -2.0, 0.0), (2.1, 2.0, 1.6))
+    level = FrontierParams(gain_box=box, explore_radius_m=None, min_gain_m3=1e-6, max_views=100)
+    pitched = dataclasses.replace(level, pitches_deg=(0.0, 27.0, -27.0))
+    level_views = explore_views(robot_map, camera, level)
+    pitched_views = explore_views(robot_map, camera, pitched)
+    assert len(pitched_views)
+    best = pitched_views[0]
+    assert best[4] == pytest.approx(math.radians(27.0)), best  # nose down
+    assert math.cos(best[3]) > 0.5  # towards the +x wall
+    best_level = level_views[:, 5].max() if len(level_views) else 0.0
+    assert best[5] > 1.5 * best_level, (best[5], best_level)
+    # its gain is the literal count of its pitched rays
+    grid = voxel_states(robot_map, pitched, None, pad_m=pitched.view_range_m)
+    x, y, z, yaw, pitch, gain, _ = best
+    assert gain == pytest.approx(_literal_gain(grid, (x, y, z), yaw, pitched, pitch), abs=2 * VOXEL**3)
+    # of equal gains the level look comes first: in a room seen all round at its own height, with only
+    # level looks' worth left, the default keeps to level
+    assert (level_views[:, 4] == 0).all()
+
+
+@pytest.mark.parametrize("bad", [(), (90.0,), (float("nan"),), [0.0, 27.0]])
+def test_bad_look_pitches_are_refused(bad):
+    with pytest.raises(ValueError, match="pitches_deg"):
+        FrontierParams(pitches_deg=bad)

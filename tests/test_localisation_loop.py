@@ -335,7 +335,7 @@ def test_a_robot_still_lost_after_its_recovery_stands_down_until_it_has_a_fix(tm
         for t in np.linspace(0.0, robot.recovery.duration, 7):
             assert robot.recovery.at(t).position == pytest.approx(estimate)
         # no task, and no look, while it stands down, though its map has a look worth a trip
-        robot.frontier, robot.frontier_frame_s = np.array([[-1.0, 0.5, 1.0, 0.0, 2.0, 1.5]]), done_at
+        robot.frontier, robot.frontier_frame_s = np.array([[-1.0, 0.5, 1.0, 0.0, 0.0, 2.0, 1.5]]), done_at
         robot.survey_ended_s = 0.0
         mission._advance_activity(robot, done_at)
         assert robot.activity == "idle"

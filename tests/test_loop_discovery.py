@@ -7,6 +7,7 @@ mode, where the paper mode would have kept few of them (it keeps what the tank m
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 
 import numpy as np
@@ -163,7 +164,7 @@ def test_an_idle_robot_surveys_its_best_look_waits_for_a_teammate_and_then_has_e
         robot = mission.robots["rov0"]
         robot.activity, robot.survey_ended_s = "idle", 10.0
         # its looks are worked out on a frame taken before its last sweep ended: stale, it waits
-        robot.frontier, robot.frontier_frame_s = np.array([[-1.0, 0.5, 1.0, 3.0, 2.0, 1.5]]), 9.0
+        robot.frontier, robot.frontier_frame_s = np.array([[-1.0, 0.5, 1.0, 3.0, 0.0, 2.0, 1.5]]), 9.0
         mission._explore(robot, 11.0)
         assert robot.activity == "idle" and not robot.explored
         # a fresh one: it flies to the look and sweeps there, and its centre ends at the look
@@ -173,25 +174,60 @@ def test_an_idle_robot_surveys_its_best_look_waits_for_a_teammate_and_then_has_e
         end = robot.route.at(robot.route.duration + 1.0)
         assert end.position == pytest.approx([-1.0, 0.5, 1.0]) and end.yaw == pytest.approx(3.0)
         # no look left but those by a teammate: it waits, up to the task timeout, then has explored
-        robot.activity, robot.frontier, robot.frontier_held = "idle", np.zeros((0, 6)), 3
+        robot.activity, robot.frontier, robot.frontier_held = "idle", np.zeros((0, 7)), 3
         mission._explore(robot, 20.0)
         assert not robot.explored and robot.frontier is None
-        robot.frontier = np.zeros((0, 6))
+        robot.frontier = np.zeros((0, 7))
         mission._explore(robot, 10.0 + params.task_timeout_s + 1.0)
         assert robot.explored
         # none at all: explored at once
         other = mission.robots["rov1"]
         other.activity, other.survey_ended_s = "idle", 0.0
-        other.frontier, other.frontier_frame_s, other.frontier_held = np.zeros((0, 6)), 1.0, 0
+        other.frontier, other.frontier_frame_s, other.frontier_held = np.zeros((0, 7)), 1.0, 0
         mission._explore(other, 2.0)
         assert other.explored
     kinds = [(e["kind"], e.get("robot")) for e in read_events(tmp_path)]
     assert ("surveying", "rov0") in kinds and ("explored", "rov0") in kinds and ("explored", "rov1") in kinds
 
 
+def test_a_robot_that_can_pitch_asks_for_pitched_looks_and_holds_the_pitch_through_the_sweep(tmp_path):
+    with mission_at_rest(tmp_path) as (mission, params):
+        robot = mission.robots["rov0"]
+        # the Heavy pitches 45 deg for a view, under the camera's 54 deg field of view: looks level, 45
+        # deg down and 45 deg up
+        assert robot.max_pitch_deg == params.max_pitch_deg == 45.0
+        assert mission._look_params(robot).pitches_deg == (0.0, 45.0, -45.0)
+        robot.max_pitch_deg = 30.0  # capped at what it pitches for a view
+        assert mission._look_params(robot).pitches_deg == (0.0, 30.0, -30.0)
+        robot.max_pitch_deg = 0.0  # a frame that cannot pitch: level looks alone
+        assert mission._look_params(robot).pitches_deg == (0.0,)
+        robot.max_pitch_deg = 45.0
+        # a robot without a DVL looks level: pitched at the floor it would lose its visual fixes
+        without = mission.robots["rov1"]
+        assert not without.has_dvl and without.max_pitch_deg == 45.0
+        assert mission._look_params(without).pitches_deg == (0.0,)
+        request = mission._explore_request(dataclasses.replace(robot, activity="idle", explored=False))
+        assert request is not None and request.params.pitches_deg == (0.0, 45.0, -45.0)
+        # a look 40 deg nose down: the robot pitches on its way there and holds it through the sweep
+        robot.activity, robot.survey_ended_s = "idle", 10.0
+        pitch = math.radians(40.0)
+        robot.frontier, robot.frontier_frame_s = np.array([[-1.0, 0.5, 1.0, 3.0, pitch, 2.0, 1.5]]), 10.5
+        mission._explore(robot, 11.0)
+        assert robot.activity == "survey"
+        approach = robot.route.legs[0].duration
+        halfway = mission._reference(robot, 11.0 + approach / 2)
+        assert halfway.pitch == pytest.approx(pitch / 2, rel=0.05)
+        for t in np.linspace(approach, robot.route.duration, 7):
+            assert mission._reference(robot, 11.0 + t).pitch == pytest.approx(pitch), t
+    (surveying,) = [e for e in read_events(tmp_path) if e["kind"] == "surveying"]
+    assert surveying["pitch_deg"] == pytest.approx(40.0)
+    with mission_at_rest(tmp_path / "level", survey_pitch_deg=0.0) as (mission, _):
+        assert mission._look_params(mission.robots["rov0"]).pitches_deg == (0.0,)
+
+
 def test_with_survey_without_dvl_off_only_the_robots_with_a_dvl_survey(tmp_path):
     with mission_at_rest(tmp_path, survey_without_dvl=False) as (mission, _):
-        look = np.array([[-1.0, 0.5, 1.0, 3.0, 2.0, 1.5]])
+        look = np.array([[-1.0, 0.5, 1.0, 3.0, 0.0, 2.0, 1.5]])
         for name in ("rov0", "rov1"):
             robot = mission.robots[name]
             robot.activity, robot.survey_ended_s = "idle", 10.0
@@ -312,7 +348,7 @@ def test_the_views_of_a_maps_gaps_are_minted_as_tasks_found_without_a_keyframe(t
     gaps = np.array([[-1.0, 0.9, 1.0, 0.0, 1.0, 0.0], [-1.0, -0.9, 1.0, 0.0, -1.0, 0.0]])
     with mission_at_rest(tmp_path) as (mission, _):
         robot = mission.robots["rov1"]
-        result = FrameResult("rov1", 5.0, None, None, 0, 0, np.zeros((0, 6)), 0.0, 0.0, gap_tasks=gaps)
+        result = FrameResult("rov1", 5.0, None, None, 0, 0, np.zeros((0, 7)), 0.0, 0.0, gap_tasks=gaps)
         mission._use_frame_result(robot, result, 6.0)
         known = mission.auction.agents[robot.index].tasks
         assert len(known) == 2
@@ -400,7 +436,7 @@ def test_a_task_counts_for_the_survey_whose_frame_found_it(tmp_path):
     with mission_at_rest(tmp_path, duration_s=0.5) as (mission, _):
         robot = mission.robots["rov0"]
         row = np.array([[-1.0, 0.0, 1.0, 1.0, 0.0, 0.0]])
-        look = np.array([[-1.0, 0.5, 1.0, 3.0, 2.0, 1.5]])
+        look = np.array([[-1.0, 0.5, 1.0, 3.0, 0.0, 2.0, 1.5]])
         for start in (10.0, 100.0):
             robot.activity, robot.survey_ended_s, robot.explored = "idle", start - 1.0, False
             robot.frontier, robot.frontier_frame_s = look.copy(), start - 0.5

@@ -15,6 +15,7 @@ import sys
 import threading
 import time
 import types
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,6 +25,8 @@ from maptidal.evaluation.coverage import CoverageModel, CoverageParams
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import mission_metrics, read_events, time_to_coverage
 from maptidal.mission.run import Mission, MissionParams
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(scope="module")
@@ -273,6 +276,40 @@ def test_a_rebuilt_report_names_only_the_images_on_disk(short_mission, tmp_path)
     images = {t["id"]: t["image"] for t in json.loads((out / "mission.json").read_text())["tasks"]}
     assert images[done[0]["task"]] is None
     assert all(images[e["task"]] == e["image"] and (out / e["image"]).is_file() for e in done[1:])
+
+
+def test_a_report_is_rebuilt_on_the_tank_the_mission_was_flown_in(short_mission, tmp_path):
+    from maptidal.tank import load_tank_config, tank_config_from_dict, tank_config_to_dict
+
+    out = tmp_path / "mission"
+    shutil.copytree(short_mission[2], out)
+    flown = json.loads((out / "mission.json").read_text())["coverage"]
+    (start,) = [e for e in read_events(out) if e["kind"] == "start"]
+    assert tank_config_from_dict(start["tank"]) == load_mission(None)[0].tank.config
+    # no --scenario: the log's own tank, the same coverage as the mission wrote
+    done = run_maptidal("report", out)
+    assert done.returncode == 0 and "does not name its tank" not in done.stderr, done.stderr
+    assert json.loads((out / "mission.json").read_text())["coverage"] == flown
+    # a log that says another tank (variant A): the report is rebuilt on that tank, as --scenario gives it
+    variant = ROOT / "tests" / "bench" / "tanks" / "variant_a"
+    lines = (out / "events.jsonl").read_text().splitlines()
+    first = json.loads(lines[0])
+    assert first["kind"] == "start"
+    first["tank"] = tank_config_to_dict(load_tank_config(variant / "tank.toml"))
+    (out / "events.jsonl").write_text("\n".join([json.dumps(first), *lines[1:]]) + "\n")
+    assert run_maptidal("report", out).returncode == 0
+    on_variant = json.loads((out / "mission.json").read_text())["coverage"]
+    assert on_variant != flown
+    explicit = tmp_path / "explicit"
+    shutil.copytree(out, explicit)
+    assert run_maptidal("report", explicit, "--scenario", variant / "mission.toml").returncode == 0
+    assert json.loads((explicit / "mission.json").read_text())["coverage"] == on_variant
+    # a log from before the start event named its tank: the default mission's, and a note that says so
+    del first["tank"]
+    (out / "events.jsonl").write_text("\n".join([json.dumps(first), *lines[1:]]) + "\n")
+    done = run_maptidal("report", out)
+    assert done.returncode == 0 and "does not name its tank" in done.stderr
+    assert json.loads((out / "mission.json").read_text())["coverage"] == flown
 
 
 def test_a_report_never_invents_figures_and_names_the_file_it_cannot_read(short_mission, tmp_path):

@@ -81,3 +81,9 @@ def test_a_survey_flies_to_the_look_facing_its_heading_then_sweeps_there(start_y
 def test_a_sweep_that_cannot_turn_the_short_way_is_refused(bad):
     with pytest.raises(ValueError, match="explore_yaw_deg"):
         MissionParams(**bad)
+
+
+@pytest.mark.parametrize("bad", [-1.0, 81.0, float("nan"), "45"])
+def test_a_survey_pitch_outside_0_to_80_deg_is_refused(bad):
+    with pytest.raises(ValueError, match="survey_pitch_deg"):
+        MissionParams(survey_pitch_deg=bad)

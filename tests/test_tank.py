@@ -1,6 +1,8 @@
 """The tank config and the geometry built from it."""
 
+import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +15,10 @@ from maptidal.tank import (
     WindowConfig,
     load_tank_config,
     tank_config_from_dict,
+    tank_config_to_dict,
 )
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_default_config_has_the_issues_dimensions():
@@ -154,3 +159,31 @@ def test_the_calibrated_variant_loads():
     assert tank.config.name == "osb_tank_calibrated"
     assert tank.strip_length > TankModel(load_tank_config(None)).strip_length  # the fit's larger region
     assert tank.baseline_geometry().strip_length <= tank.strip_length
+
+
+@pytest.mark.parametrize(
+    "path",
+    [
+        DEFAULT_TANK_CONFIG,
+        ROOT / "tests" / "bench" / "tanks" / "variant_a" / "tank.toml",
+        ROOT / "tests" / "bench" / "tanks" / "variant_b" / "tank.toml",
+        ROOT / "tests" / "bench" / "tanks" / "variant_c" / "tank.toml",
+        ROOT / "tests" / "bench" / "tanks" / "variant_d" / "tank.toml",
+    ],
+)
+def test_a_tank_config_written_out_reads_back_the_same(path):
+    import json
+    import tomllib
+
+    config = load_tank_config(path)
+    written = tank_config_to_dict(config)
+    assert tank_config_from_dict(json.loads(json.dumps(written))) == config  # through an event log's JSON
+    # every value the TOML file gives is written out as the file gives it
+    document = tomllib.loads(Path(path).read_text())
+    for table in ("end_wall", "angled_walls", "side_walls", "window", "ladder"):
+        for key, value in document.get(table, {}).items():
+            assert written[table][key] == value, (table, key)
+    assert written["fouling"] == document.get("fouling", [])
+    assert written["water_depth"] == document["water_depth"]
+    with_baseline = dataclasses.replace(config, side_baseline_length=0.3)
+    assert tank_config_from_dict(tank_config_to_dict(with_baseline)) == with_baseline

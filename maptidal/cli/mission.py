@@ -91,7 +91,10 @@ def register(commands) -> None:
     )
     report.add_argument("mission_dir", metavar="DIR", help="a mission's output folder")
     report.add_argument(
-        "--scenario", metavar="FILE", help="the mission's scenario (for the tank; default mission)"
+        "--scenario",
+        metavar="FILE",
+        help="the mission's scenario, for its tank (default: the tank the event log says the mission was "
+        "flown in; for a log that does not say, the default mission's)",
     )
     report.set_defaults(handler=run_report)
 
@@ -208,10 +211,20 @@ def run_mission(args: argparse.Namespace) -> int:
 def run_report(args: argparse.Namespace) -> int:
     """Handler of ``maptidal report``."""
     from maptidal.mission.config import load_mission
-    from maptidal.mission.outputs import rebuild, summary_table
+    from maptidal.mission.outputs import EVENTS, flown_tank, rebuild, summary_table
 
-    scenario, _ = load_mission(args.scenario)
-    document = rebuild(args.mission_dir, scenario.tank)
+    tank = None
+    if args.scenario is None and (Path(args.mission_dir) / EVENTS).is_file():
+        tank = flown_tank(args.mission_dir)  # the tank the mission was flown in, as its log says
+        if tank is None:
+            print(
+                "maptidal report: the event log does not name its tank; using the default mission's "
+                "(--scenario names the mission's own)",
+                file=sys.stderr,
+            )
+    if tank is None:
+        tank = load_mission(args.scenario)[0].tank
+    document = rebuild(args.mission_dir, tank)
     print(summary_table(document))
     print(f"report: {Path(args.mission_dir) / 'report.md'}")
     return 0

@@ -25,6 +25,8 @@
     discovery = "map-aware"  # maptidal's discovery in the loop: map-aware (the robot's own map) or paper
     explore = true         # map-aware robots with no task fly to their map's frontier (false: they do not)
     survey_without_dvl = true  # ... robots without a DVL too (false: only those with one survey)
+    survey_pitch_deg = 54.1    # a robot that can pitch pitches a look down or up as far as it pitches for
+                           # a view, at most this (the camera's vertical field of view; 0: level only)
     retire_taken = false   # map-aware robots retire tasks the team's views taken cover (true; off by default)
     explore_radius_m = 3.0 # ... within this of where each was launched (maptidal.exploration)
     inspect_region = "walls"  # what a map-aware team inspects: "walls" (the box of the evaluated walls)
@@ -93,6 +95,7 @@ MISSION_KEYS = {
     "discovery",
     "explore",
     "survey_without_dvl",
+    "survey_pitch_deg",
     "explore_radius_m",
     "dense_depth",
     "dense_candidates_m",

@@ -739,6 +739,19 @@ def summary_table(document: dict) -> str:
     return "\n".join(["| figure | value |", "|---|---|", *(f"| {a} | {b} |" for a, b in rows)])
 
 
+def flown_tank(root):
+    """The tank (a :class:`maptidal.tank.TankModel`) the mission in folder ``root`` was flown in, from its
+    event log's ``start`` event, or None for a log that does not say (written before the start event
+    carried it)."""
+    from maptidal.tank import TankModel, tank_config_from_dict
+
+    for event in read_events(root):
+        if event["kind"] == "start":
+            document = event.get("tank")
+            return None if document is None else TankModel(tank_config_from_dict(document))
+    return None
+
+
 def rebuild(root, tank) -> dict:
     """Make ``mission.json``, the plots and ``report.md`` again from the event log (and the last snapshot,
     for the comms counters and timing), as after a mission killed midway."""

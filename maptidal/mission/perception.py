@@ -97,7 +97,7 @@ class FrameResult:
     discovery_s: float
     # map-aware discovery: how many candidates each of its rules removed (MapAwareResult.counts)
     rules: dict[str, int] | None = None
-    # the robot's next looks, best first, when the job asked for them: rows (x, y, z, yaw, gain_m3,
+    # the robot's next looks, best first, when the job asked for them: rows (x, y, z, yaw, pitch, gain_m3,
     # utility) of the camera (maptidal.exploration.explore_views); none left: the robot has explored
     frontier: np.ndarray | None = None
     # with no look in ``frontier``: how many were left out only for being near a teammate

@@ -69,6 +69,7 @@ EXPLORE_TESTS = [
     "tests/test_loop_discovery.py::test_each_keyframes_dense_depth_maps_the_walls_where_they_are",
     "tests/test_loop_discovery.py::test_an_idle_robot_surveys_its_best_look_waits_for_a_teammate_and_then_has_explored",
     "tests/test_loop_discovery.py::test_with_survey_without_dvl_off_only_the_robots_with_a_dvl_survey",
+    "tests/test_loop_discovery.py::test_a_robot_that_can_pitch_asks_for_pitched_looks_and_holds_the_pitch_through_the_sweep",
 ]
 TIME_USE_TESTS = [
     "tests/test_time_use.py",
@@ -1788,6 +1789,40 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "        if False:",
             )
         ],
+    ),
+    "Y9": (
+        "a pitched look's rays turned nose up for nose down",
+        [
+            (
+                "maptidal/exploration.py",
+                "cos * rays[:, 0] + sin * rays[:, 2], rays[:, 1], cos * rays[:, 2] - sin * rays[:, 0]",
+                "cos * rays[:, 0] - sin * rays[:, 2], rays[:, 1], cos * rays[:, 2] + sin * rays[:, 0]",
+            )
+        ],
+    ),
+    "Y10": (
+        "every pitch's gains counted level",
+        [
+            (
+                "maptidal/exploration.py",
+                "look_gains(grid, candidates, yaws, params, pitch) for pitch in pitches",
+                "look_gains(grid, candidates, yaws, params) for pitch in pitches",
+            )
+        ],
+    ),
+    "Y11": (
+        "a pitched survey swept level",
+        [
+            (
+                "maptidal/mission/run.py",
+                'reference = dataclasses.replace(reference, pitch=robot.survey_log[-1]["pitch"] * share)',
+                "reference = reference",
+            )
+        ],
+    ),
+    "Y12": (
+        "a robot without a DVL takes pitched looks",
+        [("maptidal/mission/run.py", " if robot.has_dvl else 0.0\n", "\n")],
     ),
     "Z1": (
         "a robot standing down keeps its bundle",
