@@ -302,3 +302,33 @@ def test_an_interrupted_video_is_left_playable_and_the_report_says_it_was_cut_sh
     rebuilt = subprocess.run(_command("report", str(out)), capture_output=True, text=True, timeout=120)
     assert rebuilt.returncode == 0, rebuilt.stderr
     assert "`mission.part.mp4`, cut short" in (out / "report.md").read_text()
+
+
+@pytest.mark.parametrize("signalled", [True, False])
+def test_a_signal_that_an_extension_turns_into_its_own_error_still_ends_as_interrupted(
+    signalled, monkeypatch, capsys, tmp_path
+):
+    # pybind11 (MuJoCo's bindings, building the model) reports a KeyboardInterrupt raised while it
+    # converts an argument as a TypeError of its own: a Ctrl-C there ended `maptidal run` as an internal
+    # error (status 1) in a clean-clone run. Whatever error the interrupt comes out as, the command ends
+    # with the interrupt's line and status; the same error without a signal is still an internal error
+    import maptidal.cli.mission as mission_cli
+    from maptidal.cli import main
+
+    def converting(args):
+        try:
+            if signalled:
+                os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.5)  # the signal's KeyboardInterrupt is raised here
+        except KeyboardInterrupt:
+            pass
+        raise TypeError("(): incompatible function arguments")
+
+    monkeypatch.setattr(mission_cli, "run_report", converting)
+    status = main(["report", str(tmp_path)])
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1, lines
+    if signalled:
+        assert status == 130 and "maptidal report: interrupted" in lines[0]
+    else:
+        assert status == 1 and "internal error: TypeError" in lines[0]

@@ -97,28 +97,30 @@ def main(argv: Sequence[str] | None = None, interrupts: Interrupts | None = None
         _silence_stdout()
         print(f"{prefix}: error: the output pipe was closed before all output was written", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except (
-        RunError,
-        DiscoveryInputError,
-        TankConfigError,
-        ValueError,
-        KeyError,
-        OSError,
-        OverflowError,
-    ) as err:
+    except Exception as err:
+        if interrupts.received is not None:
+            # the signal's KeyboardInterrupt came out as another error: an extension's argument conversion
+            # (pybind11's, building the MuJoCo model) reports it as a TypeError of its own
+            return _interrupted(interrupts, prefix, args)
+        return _failed(err, prefix, (RunError, DiscoveryInputError, TankConfigError))
+
+
+def _failed(err: Exception, prefix: str, ours: tuple[type, ...]) -> int:
+    """One line for a command that failed with ``err``: bad input (status 2: one of ``ours``, the
+    project's input errors, or a bad value, key, path or number) or an internal error (1)."""
+    if isinstance(err, ours + (ValueError, KeyError, OSError, OverflowError)):
         print(f"{prefix}: error: {_message(err)}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except MemoryError:
+    if isinstance(err, MemoryError):
         print(f"{prefix}: error: out of memory; try smaller inputs", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except Exception as err:
-        if os.environ.get("MAPTIDAL_TRACEBACK"):
-            raise
-        print(
-            f"{prefix}: internal error: {type(err).__name__}: {err} (MAPTIDAL_TRACEBACK=1 shows where)",
-            file=sys.stderr,
-        )
-        return EXIT_INTERNAL_ERROR
+    if os.environ.get("MAPTIDAL_TRACEBACK"):
+        raise err
+    print(
+        f"{prefix}: internal error: {type(err).__name__}: {err} (MAPTIDAL_TRACEBACK=1 shows where)",
+        file=sys.stderr,
+    )
+    return EXIT_INTERNAL_ERROR
 
 
 if __name__ == "__main__":
