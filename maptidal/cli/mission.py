@@ -216,15 +216,13 @@ def run_report(args: argparse.Namespace) -> int:
     tank = None
     if args.scenario is None and (Path(args.mission_dir) / EVENTS).is_file():
         tank = flown_tank(args.mission_dir)  # the tank the mission was flown in, as its log says
-        if tank is False:
-            print(
-                "maptidal report: the event log does not name its tank; using the default mission's "
-                "(--scenario names the mission's own)",
-                file=sys.stderr,
-            )
-    if tank is None or tank is False:
-        tank = load_mission(args.scenario)[0].tank
-    document = rebuild(args.mission_dir, tank)
+    document = rebuild(args.mission_dir, load_mission(args.scenario)[0].tank if tank is None else tank)
+    if args.scenario is None and tank is None:  # said once the log is known to be readable
+        print(
+            "maptidal report: the event log does not name its tank; used the default mission's "
+            "(--scenario names the mission's own)",
+            file=sys.stderr,
+        )
     print(summary_table(document))
     print(f"report: {Path(args.mission_dir) / 'report.md'}")
     return 0

@@ -741,15 +741,12 @@ def summary_table(document: dict) -> str:
 
 def flown_tank(root):
     """The tank (a :class:`maptidal.tank.TankModel`) the mission in folder ``root`` was flown in, from its
-    event log's ``start`` event; None for a log without one, False for one whose start event does not
-    say (written before the start event carried it)."""
+    event log's ``start`` event; None where the log does not say (written before the start event carried
+    it, or without a start event)."""
     from maptidal.tank import TankModel, tank_config_from_dict
 
-    for event in read_events(root):
-        if event["kind"] == "start":
-            document = event.get("tank")
-            return False if document is None else TankModel(tank_config_from_dict(document))
-    return None
+    start = next((event for event in read_events(root) if event["kind"] == "start"), {})
+    return None if "tank" not in start else TankModel(tank_config_from_dict(start["tank"]))
 
 
 def rebuild(root, tank) -> dict:
