@@ -256,6 +256,70 @@ def test_a_signal_at_the_end_of_an_import_is_not_raised_again_while_the_line_is_
     assert signal.getsignal(signal.SIGINT) is before
 
 
+def test_a_retry_pending_when_the_command_imports_end_does_not_raise_while_it_names_the_command(
+    monkeypatch, capsys
+):
+    # the race a clean-clone CI run met: SIGINT in the imports' last 20 ms, the imports end before the
+    # retry, and the retry fired while `maptidal` was still working out the command's name for its line
+    # (status -2 and a traceback). Here the signal is made to come at a bad moment, the imports then end
+    # at once, and naming the command takes 100 ms, five retry periods
+    import importlib
+
+    import maptidal.cli as cli
+    import maptidal.cli.interrupts as interrupts_module
+
+    calls = []
+
+    def bad_only_the_first_time(frame):
+        calls.append(frame)
+        return len(calls) == 1
+
+    real_import = importlib.import_module
+    real_import("maptidal.cli.app")  # imported already, so that the fake below is not called from inside it
+
+    def importing_then_signalled(name):
+        module = real_import(name)
+        os.kill(os.getpid(), signal.SIGINT)
+        (lambda: None)()  # a call: the handler runs here, at what it is told is a bad moment
+        return module
+
+    real_prefix = interrupts_module.prefix_from_argv
+
+    def slow_prefix(argv):
+        time.sleep(0.1)
+        return real_prefix(argv)
+
+    monkeypatch.setattr(interrupts_module, "at_a_bad_moment", bad_only_the_first_time)
+    monkeypatch.setattr(cli.importlib, "import_module", importing_then_signalled)
+    monkeypatch.setattr(cli, "prefix_from_argv", slow_prefix)
+    try:
+        status = cli.main(["sweep", "--help"])
+    except KeyboardInterrupt:
+        pytest.fail("the pending retry raised KeyboardInterrupt out of maptidal.cli.main")
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(calls) == 1  # the retry was cancelled, not merely caught
+    assert status == 130 and lines == ["maptidal sweep: interrupted; files written so far are complete"]
+
+
+def test_an_interrupt_before_the_command_has_its_own_handler_still_ends_in_one_line(monkeypatch, capsys):
+    # a signal whose KeyboardInterrupt comes in the first instructions of app.main, before its try
+    import maptidal.cli as cli
+    import maptidal.cli.app as app
+
+    def interrupted_on_entry(argv, interrupts):
+        interrupts._handle(signal.SIGTERM, None)  # what the signal handler does, at a safe moment
+        raise AssertionError("not reached: the handler raises KeyboardInterrupt")
+
+    monkeypatch.setattr(app, "main", interrupted_on_entry)
+    try:
+        status = cli.main(["run", "--help"])
+    except KeyboardInterrupt:
+        pytest.fail("a KeyboardInterrupt from app.main's first instructions escaped maptidal.cli.main")
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert status == 143
+    assert lines == ["maptidal run: terminated (SIGTERM); files written so far are complete"]
+
+
 def test_bad_moments_are_imports_and_starting_a_child():
     import inspect
 

@@ -44,12 +44,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     with Interrupts() as interrupts:
         try:
             app = importlib.import_module("maptidal.cli.app")
+            if interrupts.received is None:  # else the signal came during the imports and was swallowed
+                return app.main(argv, interrupts)
         except KeyboardInterrupt:
-            app = None
-        if app is None or interrupts.received is not None:  # during the imports, swallowed or not
-            print(interrupts.message(prefix_from_argv(argv)), file=sys.stderr)
-            return interrupts.status
-        return app.main(argv, interrupts)
+            pass  # during the imports, or one that app.main had no handler around yet
+        # A signal in the imports' last 20 ms leaves its retry pending after them: it raises once, in the
+        # first instructions from here, so settle before anything else, and absorb that one raise
+        try:
+            interrupts.settle()
+        except KeyboardInterrupt:
+            interrupts.settle()
+        print(interrupts.message(prefix_from_argv(argv)), file=sys.stderr)
+        return interrupts.status
 
 
 def __getattr__(name: str):

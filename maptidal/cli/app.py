@@ -89,6 +89,7 @@ def main(argv: Sequence[str] | None = None, interrupts: Interrupts | None = None
         status = args.handler(args)
         sys.stdout.flush()
         if interrupts.received is not None:  # a library swallowed the KeyboardInterrupt: say so all the same
+            interrupts.settle()  # inside the try: a retry still pending lands in the handler below
             return _interrupted(interrupts, prefix, args)
         return status
     except KeyboardInterrupt:
