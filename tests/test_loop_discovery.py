@@ -225,6 +225,54 @@ def test_a_robot_that_can_pitch_asks_for_pitched_looks_and_holds_the_pitch_throu
         assert mission._look_params(mission.robots["rov0"]).pitches_deg == (0.0,)
 
 
+def _turn_s(degrees: float, rate_deg_s: float) -> float:
+    """How long a turn of ``degrees`` takes from rest to rest at ``rate_deg_s``, reached in 1 s (the
+    loop's yaw acceleration is its yaw rate per second): a trapezoid, ramps of 1 s each way, or, for a
+    turn too short to reach the rate (under the two ramps' rate x 1 s), a triangle."""
+    if degrees >= rate_deg_s:
+        return degrees / rate_deg_s + 1.0
+    return 2.0 * math.sqrt(degrees / rate_deg_s)
+
+
+def test_each_robot_sweeps_as_wide_and_as_fast_as_its_settings_say(tmp_path):
+    settings = {"survey_sweep_deg": 30.0, "survey_sweep_no_dvl_deg": 0.0, "sweep_rate_dvl_deg_s": 36.0}
+    with mission_at_rest(tmp_path, **settings) as (mission, params):
+        rov0, rov1 = mission.robots["rov0"], mission.robots["rov1"]
+        assert rov0.has_dvl and not rov1.has_dvl
+        # the first sweep: 60 deg one way, 120 back, 60 home; the robot with the DVL at 36 deg/s
+        for robot, rate in ((rov0, 36.0), (rov1, params.yaw_rate_deg_s)):
+            mission._start_exploring(robot, 0.0)
+            expected = 2 * _turn_s(params.explore_yaw_deg, rate) + _turn_s(2 * params.explore_yaw_deg, rate)
+            assert robot.route.duration == pytest.approx(expected)
+        # a survey: the robot with the DVL sweeps 30 deg either side at 36 deg/s, the one without none
+        look = np.array([[-1.0, 0.5, 1.0, 3.0, 0.0, 2.0, 1.5]])
+        for robot in (rov0, rov1):
+            robot.activity, robot.survey_ended_s = "idle", 10.0
+            robot.frontier, robot.frontier_frame_s = look.copy(), 10.5
+            mission._explore(robot, 11.0)
+            assert robot.activity == "survey"
+        assert len(rov0.route.legs) == 4 and len(rov1.route.legs) == 1
+        sweep_s = rov0.route.duration - rov0.route.legs[0].duration
+        assert sweep_s == pytest.approx(2 * _turn_s(30.0, 36.0) + _turn_s(60.0, 36.0))
+        headings = [rov0.route.at(rov0.route.starts[1] + t).yaw for t in np.linspace(0, sweep_s, 200)]
+        offsets = np.degrees(np.remainder(np.array(headings) - 3.0 + math.pi, 2 * math.pi) - math.pi)
+        assert offsets.min() == pytest.approx(-30.0, abs=0.5)
+        assert offsets.max() == pytest.approx(30.0, abs=0.5)
+    # by default the robot with the DVL sweeps a look as its first sweep, at 39 deg/s; the one without
+    # takes the look's own view
+    with mission_at_rest(tmp_path / "defaults") as (mission, params):
+        assert (params.survey_sweep_deg, params.survey_sweep_no_dvl_deg) == (params.explore_yaw_deg, 0.0)
+        for robot in mission.robots.values():
+            robot.activity, robot.survey_ended_s = "idle", 10.0
+            robot.frontier, robot.frontier_frame_s = look.copy(), 10.5
+            mission._explore(robot, 11.0)
+        rov0, rov1 = mission.robots["rov0"], mission.robots["rov1"]
+        sweep_s = rov0.route.duration - rov0.route.legs[0].duration
+        width = params.explore_yaw_deg
+        assert sweep_s == pytest.approx(2 * _turn_s(width, 39.0) + _turn_s(2 * width, 39.0))
+        assert len(rov1.route.legs) == 1
+
+
 def test_with_survey_without_dvl_off_only_the_robots_with_a_dvl_survey(tmp_path):
     with mission_at_rest(tmp_path, survey_without_dvl=False) as (mission, _):
         look = np.array([[-1.0, 0.5, 1.0, 3.0, 0.0, 2.0, 1.5]])

@@ -87,3 +87,28 @@ def test_a_sweep_that_cannot_turn_the_short_way_is_refused(bad):
 def test_a_survey_pitch_outside_0_to_80_deg_is_refused(bad):
     with pytest.raises(ValueError, match="survey_pitch_deg"):
         MissionParams(survey_pitch_deg=bad)
+
+
+@pytest.mark.parametrize("yaw", [0.0, 2.9])
+def test_a_survey_without_a_sweep_ends_at_the_look_facing_its_heading(yaw):
+    start, look = np.array([-1.0, 0.5, 1.0]), np.array([-2.0, -0.3, 0.6])
+    route = survey_route(start, 0.3, look, yaw, 0.0, LIMITS)
+    assert len(route.legs) == 1  # the flight alone: no turn at the look
+    flight = PoseTrajectory(start, 0.3, look, yaw, LIMITS)
+    assert route.duration == pytest.approx(flight.duration)
+    end = route.at(route.duration)
+    np.testing.assert_allclose(end.position, look, atol=1e-9)
+    assert wrap_angle(end.yaw - yaw) == pytest.approx(0, abs=1e-9)
+
+
+@pytest.mark.parametrize("name", ["survey_sweep_deg", "survey_sweep_no_dvl_deg"])
+@pytest.mark.parametrize("bad", [-1.0, 90.0, float("nan"), "30"])
+def test_a_survey_sweep_outside_0_to_90_deg_is_refused(name, bad):
+    with pytest.raises(ValueError, match=name):
+        MissionParams(**{name: bad})
+
+
+@pytest.mark.parametrize("bad", [0.0, -5.0, float("inf"), float("nan"), "39"])
+def test_a_sweep_rate_that_is_not_a_positive_number_is_refused(bad):
+    with pytest.raises(ValueError, match="sweep_rate_dvl_deg_s"):
+        MissionParams(sweep_rate_dvl_deg_s=bad)

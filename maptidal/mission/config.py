@@ -27,6 +27,9 @@
     survey_without_dvl = true  # ... robots without a DVL too (false: only those with one survey)
     survey_pitch_deg = 54.1    # a robot that can pitch pitches a look down or up as far as it pitches for
                            # a view, at most this (the camera's vertical field of view; 0: level only)
+    survey_sweep_deg = 60.0    # how far a robot with a DVL sweeps either side of a look's heading ...
+    survey_sweep_no_dvl_deg = 0.0  # ... and a robot without one (0: the look's own view alone)
+    sweep_rate_dvl_deg_s = 39.0    # how fast a robot with a DVL turns through its sweeps
     retire_taken = false   # map-aware robots retire tasks the team's views taken cover (true; off by default)
     explore_radius_m = 3.0 # ... within this of where each was launched (maptidal.exploration)
     inspect_region = "walls"  # what a map-aware team inspects: "walls" (the box of the evaluated walls)
@@ -96,6 +99,9 @@ MISSION_KEYS = {
     "explore",
     "survey_without_dvl",
     "survey_pitch_deg",
+    "survey_sweep_deg",
+    "survey_sweep_no_dvl_deg",
+    "sweep_rate_dvl_deg_s",
     "explore_radius_m",
     "dense_depth",
     "dense_candidates_m",

@@ -34,10 +34,16 @@ def sweep_legs(
 
 
 def survey_route(
-    start: np.ndarray, start_yaw: float, look: np.ndarray, yaw: float, sweep_rad: float, limits: MotionLimits
+    start: np.ndarray,
+    start_yaw: float,
+    look: np.ndarray,
+    yaw: float,
+    sweep_rad: float,
+    limits: MotionLimits,
+    sweep_limits: MotionLimits | None = None,
 ) -> Route:
     """A survey from ``start`` facing ``start_yaw``: fly to ``look``, turning on the way to the look's
-    heading ``yaw``, then sweep there (``sweep_legs``)."""
-    return Route(
-        [PoseTrajectory(start, start_yaw, look, yaw, limits), *sweep_legs(look, yaw, sweep_rad, limits)]
-    )
+    heading ``yaw``, then sweep there (``sweep_legs``, within ``sweep_limits``, by default ``limits``;
+    none when ``sweep_rad`` is 0)."""
+    sweep = sweep_legs(look, yaw, sweep_rad, sweep_limits or limits) if sweep_rad > 0 else []
+    return Route([PoseTrajectory(start, start_yaw, look, yaw, limits), *sweep])

@@ -69,6 +69,7 @@ EXPLORE_TESTS = [
     "tests/test_loop_discovery.py::test_each_keyframes_dense_depth_maps_the_walls_where_they_are",
     "tests/test_loop_discovery.py::test_an_idle_robot_surveys_its_best_look_waits_for_a_teammate_and_then_has_explored",
     "tests/test_loop_discovery.py::test_with_survey_without_dvl_off_only_the_robots_with_a_dvl_survey",
+    "tests/test_loop_discovery.py::test_each_robot_sweeps_as_wide_and_as_fast_as_its_settings_say",
     "tests/test_loop_discovery.py::test_a_robot_that_can_pitch_asks_for_pitched_looks_and_holds_the_pitch_through_the_sweep",
 ]
 TIME_USE_TESTS = [
@@ -791,6 +792,17 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
     "I6": (
         "a signal's retry left pending after the command printed its line",
         [("maptidal/cli/interrupts.py", "        self.settle()\n", "        pass\n")],
+    ),
+    "I7": (
+        "a retry still pending when the imports end is not cancelled before the command names itself",
+        [
+            (
+                "maptidal/cli/__init__.py",
+                "        try:\n            interrupts.settle()\n"
+                "        except KeyboardInterrupt:\n            interrupts.settle()\n",
+                "",
+            )
+        ],
     ),
     "B1": (
         "the batched rate loops' integrator ignores saturation",
@@ -1823,6 +1835,36 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
     "Y12": (
         "a robot without a DVL takes pitched looks",
         [("maptidal/mission/run.py", " if robot.has_dvl else 0.0\n", "\n")],
+    ),
+    "Y13": (
+        "each robot surveys with the other's sweep width",
+        [
+            (
+                "maptidal/mission/run.py",
+                "width = self.params.survey_sweep_deg if robot.has_dvl else",
+                "width = self.params.survey_sweep_deg if not robot.has_dvl else",
+            )
+        ],
+    ),
+    "Y14": (
+        "a robot with a DVL sweeps at the slow rate",
+        [
+            (
+                "maptidal/mission/run.py",
+                "        if not robot.has_dvl:\n            return self._limits()",
+                "        return self._limits()",
+            )
+        ],
+    ),
+    "Y15": (
+        "a survey's sweep at the flight's limits",
+        [
+            (
+                "maptidal/mission/routes.py",
+                "sweep_legs(look, yaw, sweep_rad, sweep_limits or limits)",
+                "sweep_legs(look, yaw, sweep_rad, limits)",
+            )
+        ],
     ),
     "Z1": (
         "a robot standing down keeps its bundle",
