@@ -239,8 +239,10 @@ def test_each_robot_sweeps_as_wide_and_as_fast_as_its_settings_say(tmp_path):
     with mission_at_rest(tmp_path, **settings) as (mission, params):
         rov0, rov1 = mission.robots["rov0"], mission.robots["rov1"]
         assert rov0.has_dvl and not rov1.has_dvl
-        # the first sweep: 60 deg one way, 120 back, 60 home; the robot with the DVL at 36 deg/s
-        for robot, rate in ((rov0, 36.0), (rov1, params.yaw_rate_deg_s)):
+        # the first sweep, where the team starts: 60 deg one way, 120 back, 60 home, at the same rate for
+        # both (a robot with a DVL that set off sooner met its teammate on the boustrophedon's lanes)
+        rate = params.yaw_rate_deg_s
+        for robot in (rov0, rov1):
             mission._start_exploring(robot, 0.0)
             expected = 2 * _turn_s(params.explore_yaw_deg, rate) + _turn_s(2 * params.explore_yaw_deg, rate)
             assert robot.route.duration == pytest.approx(expected)

@@ -29,7 +29,7 @@
                            # a view, at most this (the camera's vertical field of view; 0: level only)
     survey_sweep_deg = 60.0    # how far a robot with a DVL sweeps either side of a look's heading ...
     survey_sweep_no_dvl_deg = 0.0  # ... and a robot without one (0: the look's own view alone)
-    sweep_rate_dvl_deg_s = 39.0    # how fast a robot with a DVL turns through its sweeps
+    sweep_rate_dvl_deg_s = 39.0    # how fast a robot with a DVL turns through a survey's sweep
     retire_taken = false   # map-aware robots retire tasks the team's views taken cover (true; off by default)
     explore_radius_m = 3.0 # ... within this of where each was launched (maptidal.exploration)
     inspect_region = "walls"  # what a map-aware team inspects: "walls" (the box of the evaluated walls)

@@ -9,7 +9,9 @@ The turn back to the heading shows no heading the sweep did not, but it takes a 
 the middle of the view. A sweep without it (to one side, then across, reaching the first side on the
 way to a look) halved a survey's median time (36 s to 20 s) but, on seeds 0-9 of the default tank, left
 more of the walls uninspected on the missions with no collision (CHANGELOG, session 32), so the sweep
-turns back.
+turns back. A survey with ``sweep_rad`` 0 is the flight to the look alone: the loop's robots without a
+DVL survey so (``MissionParams.survey_sweep_no_dvl_deg``), and those with one sweep faster
+(``sweep_rate_dvl_deg_s``: the limits a sweep is given may differ from the flight's).
 """
 
 from __future__ import annotations

@@ -305,18 +305,21 @@ class MissionParams:
     # its first sweep (explore_yaw_deg), so that a look's side views map what the look's own view only
     # grazed; a robot without one not at all (0: it takes the look's own view, and plans its next look on
     # the map that view updated). Its visual odometry fails on most frames while it turns (README,
-    # "Without a DVL"), and a sweep at each look was 20 s of such turning. Measured against both robots
-    # sweeping 60 deg at 12 deg/s (seeds 0-9, paired): finish -43, -48, -31 and -14 s on the default
-    # tank and variants A, B and C, the walls uninspected within the seeds' noise on each. Neither robot
-    # sweeping was quicker still, but on variant C (1.6 m deep), where a single pitched look's sweep
-    # found the foot of the end wall, it left 11 % of the walls uninspected against 4.6 %
+    # "Without a DVL"), and a sweep at each look was 20 s of such turning. With sweep_rate_dvl_deg_s,
+    # against both robots sweeping 60 deg at 12 deg/s (seeds 0-9, paired): finish -30, -2, -68 and -12 s
+    # on the default tank and variants A, B and C, -37 s on D (held out), the walls uninspected within
+    # the seeds' noise on each. Neither robot sweeping was quicker still, but on variant C (1.6 m deep),
+    # where a single pitched look's sweep found the foot of the end wall, it left 11 % of the walls
+    # uninspected against 4.6 % (README, "Exploring the map's frontier")
     survey_sweep_deg: float = 60.0
     survey_sweep_no_dvl_deg: float = 0.0
-    # how fast a robot with a DVL turns through its sweeps (one without turns at yaw_rate_deg_s, for its
-    # visual odometry): the camera turns half its field of view (78.5 deg) between two frames at 1 Hz,
-    # so that each frame shares half its view with the one before and the sweep's frames leave no gap.
-    # The DVL, not the images, holds its position. Alone (the robot without one still sweeping at each
-    # look) it moved the default tank's finish by -7 s, within the seeds' noise
+    # how fast a robot with a DVL turns through a survey's sweep (one without turns at yaw_rate_deg_s,
+    # for its visual odometry): the camera turns half its field of view (78.5 deg) between two frames at
+    # 1 Hz, so that each frame shares half its view with the one before and the sweep's frames leave no
+    # gap. The DVL, not the images, holds its position. The first sweep, where the team starts, stays at
+    # yaw_rate_deg_s for every planner: turning it this fast too set the robot with the DVL off 14 s
+    # before its teammate, and the boustrophedon's lanes on variant B then brought the two together (the
+    # walls uninspected +7.4 points [+1.1, +13.7], seeds 0-9, paired)
     sweep_rate_dvl_deg_s: float = 39.0
     frontier: FrontierParams = field(default_factory=FrontierParams)
     # a map-aware robot retires a task on its path whose view the views the team has taken since leave
@@ -841,7 +844,7 @@ class Mission:
         )
 
     def _sweep_limits(self, robot: _Robot) -> MotionLimits:
-        """The motion limits of ``robot``'s sweeps: a robot with a DVL turns at ``sweep_rate_dvl_deg_s``."""
+        """The limits of ``robot``'s survey sweeps: one with a DVL turns at ``sweep_rate_dvl_deg_s``."""
         if not robot.has_dvl:
             return self._limits()
         rate = math.radians(self.params.sweep_rate_dvl_deg_s)
@@ -858,7 +861,7 @@ class Mission:
         estimate = self._estimate(robot)
         here, yaw = estimate.position.copy(), estimate.yaw
         robot.home_position, robot.home_yaw = here.copy(), yaw
-        robot.route = Route(self._sweep(here, yaw, self._sweep_limits(robot)))
+        robot.route = Route(self._sweep(here, yaw))
         robot.route_start_s = now
 
     def _reference(self, robot: _Robot, now: float):

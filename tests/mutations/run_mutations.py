@@ -1866,6 +1866,16 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             )
         ],
     ),
+    "Y16": (
+        "the first sweep at a survey's rate",
+        [
+            (
+                "maptidal/mission/run.py",
+                "robot.route = Route(self._sweep(here, yaw))",
+                "robot.route = Route(self._sweep(here, yaw, self._sweep_limits(robot)))",
+            )
+        ],
+    ),
     "Z1": (
         "a robot standing down keeps its bundle",
         [("maptidal/allocation/agent.py", "        self._drop_from_bundle(set(self.bundle))\n", "")],
