@@ -256,6 +256,18 @@ def test_a_signal_at_the_end_of_an_import_is_not_raised_again_while_the_line_is_
     assert signal.getsignal(signal.SIGINT) is before
 
 
+def _main_in_process(argv: list[str], capsys) -> tuple[int, list[str]]:
+    """``maptidal.cli.main(argv)`` in this process: its status and the lines it printed on stderr. A
+    KeyboardInterrupt escaping it fails the test (rather than stopping pytest)."""
+    import maptidal.cli as cli
+
+    try:
+        status = cli.main(argv)
+    except KeyboardInterrupt:
+        pytest.fail(f"a KeyboardInterrupt escaped maptidal.cli.main({argv})")
+    return status, capsys.readouterr().err.strip().splitlines()
+
+
 def test_a_retry_pending_when_the_command_imports_end_does_not_raise_while_it_names_the_command(
     monkeypatch, capsys
 ):
@@ -292,18 +304,13 @@ def test_a_retry_pending_when_the_command_imports_end_does_not_raise_while_it_na
     monkeypatch.setattr(interrupts_module, "at_a_bad_moment", bad_only_the_first_time)
     monkeypatch.setattr(cli.importlib, "import_module", importing_then_signalled)
     monkeypatch.setattr(cli, "prefix_from_argv", slow_prefix)
-    try:
-        status = cli.main(["sweep", "--help"])
-    except KeyboardInterrupt:
-        pytest.fail("the pending retry raised KeyboardInterrupt out of maptidal.cli.main")
-    lines = capsys.readouterr().err.strip().splitlines()
+    status, lines = _main_in_process(["sweep", "--help"], capsys)
     assert len(calls) == 1  # the retry was cancelled, not merely caught
     assert status == 130 and lines == ["maptidal sweep: interrupted; files written so far are complete"]
 
 
 def test_an_interrupt_before_the_command_has_its_own_handler_still_ends_in_one_line(monkeypatch, capsys):
     # a signal whose KeyboardInterrupt comes in the first instructions of app.main, before its try
-    import maptidal.cli as cli
     import maptidal.cli.app as app
 
     def interrupted_on_entry(argv, interrupts):
@@ -311,11 +318,7 @@ def test_an_interrupt_before_the_command_has_its_own_handler_still_ends_in_one_l
         raise AssertionError("not reached: the handler raises KeyboardInterrupt")
 
     monkeypatch.setattr(app, "main", interrupted_on_entry)
-    try:
-        status = cli.main(["run", "--help"])
-    except KeyboardInterrupt:
-        pytest.fail("a KeyboardInterrupt from app.main's first instructions escaped maptidal.cli.main")
-    lines = capsys.readouterr().err.strip().splitlines()
+    status, lines = _main_in_process(["run", "--help"], capsys)
     assert status == 143
     assert lines == ["maptidal run: terminated (SIGTERM); files written so far are complete"]
 

@@ -850,12 +850,9 @@ class Mission:
         rate = math.radians(self.params.sweep_rate_dvl_deg_s)
         return dataclasses.replace(self._limits(), max_yaw_rate=rate, max_yaw_accel=rate)
 
-    def _sweep(
-        self, position: np.ndarray, yaw: float, limits: MotionLimits | None = None
-    ) -> list[PoseTrajectory]:
+    def _sweep(self, position: np.ndarray, yaw: float) -> list[PoseTrajectory]:
         """The exploration's yaw sweep at ``position``, facing ``yaw`` (``sweep_legs``)."""
-        sweep = math.radians(self.params.explore_yaw_deg)
-        return sweep_legs(position, yaw, sweep, limits or self._limits())
+        return sweep_legs(position, yaw, math.radians(self.params.explore_yaw_deg), self._limits())
 
     def _start_exploring(self, robot: _Robot, now: float) -> None:
         estimate = self._estimate(robot)

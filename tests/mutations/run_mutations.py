@@ -1872,7 +1872,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
             (
                 "maptidal/mission/run.py",
                 "robot.route = Route(self._sweep(here, yaw))",
-                "robot.route = Route(self._sweep(here, yaw, self._sweep_limits(robot)))",
+                "robot.route = Route(sweep_legs(here, yaw, math.radians(self.params.explore_yaw_deg), "
+                "self._sweep_limits(robot)))",
             )
         ],
     ),
