@@ -69,7 +69,7 @@ from scipy.spatial import cKDTree
 from maptidal.camera import OAKD_HFOV_DEG, OAKD_VFOV_DEG
 from maptidal.map_discovery import RobotMap, check_box, unpack_voxels
 
-__all__ = ["FrontierParams", "explore_views", "voxel_states"]
+__all__ = ["Exploration", "FrontierParams", "explore", "explore_views", "voxel_states"]
 
 UNKNOWN, FREE, LOOKED, OCCUPIED, OUTSIDE = 0, 1, 2, 3, 4
 
@@ -364,6 +364,34 @@ def look_gains(
     return counts.reshape(len(positions), len(yaws)) * grid.size**3
 
 
+@dataclass(frozen=True)
+class Exploration:
+    """What one next-look search found (:func:`explore`), and, with no look worth a trip, why.
+
+    views: the looks, rows as :func:`explore_views` returns them; frontier_voxels: the unknown voxels
+    bordering seen water in the counted box; stands: the places a look could stand, after every rule;
+    best_gain_m3: the largest gain of any look weighed, worth a trip or not (0 when none was weighed);
+    why: "" with looks, else what ran out first: "no water seen", "no frontier", "no stand" (none clear
+    of the map, the surface, the floor, the teammates and the places surveyed), "no stand near the
+    frontier" (none within a cell of it), or "too little to see" (every look's gain under
+    ``min_gain_m3``)."""
+
+    views: np.ndarray
+    frontier_voxels: int = 0
+    stands: int = 0
+    best_gain_m3: float = 0.0
+    why: str = ""
+
+    def summary(self) -> dict:
+        """The search's numbers, for an event or a report (no views)."""
+        return {
+            "why": self.why,
+            "frontier_voxels": self.frontier_voxels,
+            "stands": self.stands,
+            "best_gain_m3": round(self.best_gain_m3, 4),
+        }
+
+
 def explore_views(
     robot_map: RobotMap,
     position: np.ndarray,
@@ -378,18 +406,31 @@ def explore_views(
     ``max_views``, each revealing at least ``min_gain_m3`` (module docstring). ``position`` is the robot's
     own; ``launch`` its launch point (the centre of the region to explore); ``teammates`` rows ``(x, y, z,
     ...)`` where teammates' last messages put them; ``visited`` ``(M, 3)`` the places it surveyed. No row:
-    nothing worth a trip is left."""
+    nothing worth a trip is left (:func:`explore` says why)."""
+    return explore(robot_map, position, params, launch, teammates, visited).views
+
+
+def explore(
+    robot_map: RobotMap,
+    position: np.ndarray,
+    params: FrontierParams | None = None,
+    launch: np.ndarray | None = None,
+    teammates: np.ndarray | None = None,
+    visited: np.ndarray | None = None,
+) -> Exploration:
+    """:func:`explore_views`'s looks, with the numbers that say why there are none (:class:`Exploration`):
+    a robot that has explored says what it saw no more of."""
     params = params or FrontierParams()
     empty = np.zeros((0, 7))
     if not robot_map.free_voxels:
-        return empty
+        return Exploration(empty, why="no water seen")
     position = np.asarray(position, float).reshape(3)
     if not np.all(np.isfinite(position)):
-        return empty
+        return Exploration(empty, why="no water seen")
     grid = voxel_states(robot_map, params, launch, pad_m=params.view_range_m)
     frontier = grid.centres(_frontier(grid))
     if len(frontier) == 0:
-        return empty
+        return Exploration(empty, why="no frontier")
     # where a look could stand: seen water all round, clear of the map and below the surface
     free_index = np.argwhere(_clear_of_unseen(grid, params.free_margin_m))
     stands = grid.centres(free_index)
@@ -410,14 +451,15 @@ def explore_views(
                 rows = rows.reshape(len(rows), -1)[:, :3]
                 ok &= cKDTree(rows).query(stands, k=1)[0] > radius
     stands = stands[ok]
+    found = {"frontier_voxels": len(frontier), "stands": len(stands)}
     if len(stands) == 0:
-        return empty
+        return Exploration(empty, **found, why="no stand")
     # each frontier voxel's nearest stand, within a cell; one stand per cell, those beside the most
     # frontier first
     distance, nearest = cKDTree(stands).query(frontier, k=1, distance_upper_bound=params.cell_m)
     nearest = nearest[np.isfinite(distance)]
     if len(nearest) == 0:
-        return empty
+        return Exploration(empty, **found, why="no stand near the frontier")
     chosen, votes = np.unique(nearest, return_counts=True)
     cells = np.floor(stands[chosen] / params.cell_m).astype(np.int64)
     order = np.argsort(-votes, kind="stable")
@@ -437,4 +479,10 @@ def explore_views(
     rows = np.column_stack([candidates, heading, pitches[best // len(yaws)], gain, utility])
     rows = rows[worth]
     rows = rows[np.argsort(-rows[:, 6], kind="stable")]
-    return rows[: params.max_views]
+    best_gain = float(gain.max()) if len(gain) else 0.0
+    return Exploration(
+        rows[: params.max_views],
+        **found,
+        best_gain_m3=best_gain,
+        why="" if len(rows) else "too little to see",
+    )

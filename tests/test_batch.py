@@ -214,6 +214,8 @@ def test_a_batch_gives_the_same_numbers_locally_and_on_ray(tmp_path, ray_cluster
         (["--duration", "-5"], "must be greater than 0"),
         (["--planners", "voronoi,greedy"], "unknown planner 'greedy'"),
         (["--seeds", ""], "bad seeds"),
+        (["a.toml", "--scenario", "b.toml"], "two scenarios given (a.toml, --scenario b.toml)"),
+        (["--scenario", "no_such_mission.toml"], "scenario not found: no_such_mission.toml"),
     ],
 )
 def test_bad_batch_arguments_give_one_line(tmp_path, arguments, message):

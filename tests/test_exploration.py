@@ -20,6 +20,7 @@ from maptidal.exploration import (
     VoxelStates,
     _clear_of_unseen,
     _frontier,
+    explore,
     explore_views,
     look_gains,
     voxel_states,
@@ -373,3 +374,33 @@ def test_a_pitched_look_reveals_more_of_the_water_before_a_walls_foot_than_any_l
 def test_bad_look_pitches_are_refused(bad):
     with pytest.raises(ValueError, match="pitches_deg"):
         FrontierParams(pitches_deg=bad)
+
+
+def test_a_search_with_no_look_says_what_ran_out_first():
+    """explore: the looks explore_views gives, and, with none, why: no water seen, no stand (a teammate
+    everywhere), or too little to see, with the best look's gain the same search gives when every look
+    counts (min_gain_m3 next to 0, max_views large enough for all)."""
+    walls = _room()
+    camera = np.array([-0.5, 0.0, 1.0])
+    assert explore(RobotMap(MapAwareParams()), camera).why == "no water seen"
+    robot_map = RobotMap(MapAwareParams(surface_z=2.0))
+    _look(robot_map, camera, 0.0, walls)
+    found = explore(robot_map, camera, launch=camera)
+    assert found.why == "" and len(found.views) and found.stands > 0 and found.frontier_voxels > 0
+    np.testing.assert_array_equal(found.views, explore_views(robot_map, camera, launch=camera))
+    every = explore_views(
+        robot_map, camera, FrontierParams(min_gain_m3=1e-9, max_views=10_000), launch=camera
+    )
+    assert found.best_gain_m3 == pytest.approx(every[:, 5].max())
+    demanding = FrontierParams(min_gain_m3=every[:, 5].max() + 0.01)
+    short = explore(robot_map, camera, demanding, launch=camera)
+    assert len(short.views) == 0 and short.why == "too little to see"
+    assert short.best_gain_m3 == pytest.approx(every[:, 5].max()) and short.stands == found.stands
+    crowded = explore(robot_map, camera, FrontierParams(teammate_exclusion_m=50.0), camera, camera[None])
+    assert len(crowded.views) == 0 and crowded.why == "no stand" and crowded.stands == 0
+    assert crowded.summary() == {
+        "why": "no stand",
+        "frontier_voxels": found.frontier_voxels,
+        "stands": 0,
+        "best_gain_m3": 0.0,
+    }

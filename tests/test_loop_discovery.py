@@ -19,7 +19,7 @@ from maptidal.envs.scenario import inside_tank
 from maptidal.evaluation.free_space import free_space_mask
 from maptidal.mission import run as run_module
 from maptidal.mission.config import load_mission
-from maptidal.mission.outputs import read_events
+from maptidal.mission.outputs import read_events, rebuild
 from maptidal.mission.run import Mission, MissionParams, inspection_box
 from maptidal.tank import LadderConfig, TankConfig, TankModel, WindowConfig
 
@@ -510,3 +510,36 @@ def test_a_task_counts_for_the_survey_whose_frame_found_it(tmp_path):
     assert outcome["seconds_without_tasks"] == pytest.approx(second["end_s"] - second["start_s"], abs=1e-3)
     report = (tmp_path / "report.md").read_text()
     assert "## What the surveys found" in report and "| rov0 | 2 | 1 | 0 |" in report
+
+
+def test_a_robot_that_has_explored_says_when_and_why(tmp_path):
+    """With no look worth a trip a robot has explored: its ``explored`` event, ``mission.json``'s
+    ``explored`` and the report's table say when, and what its last search ran out of (here the best
+    look's gain under the one a look must reveal); ``maptidal report``'s rebuild from the event log says
+    the same. A robot with looks left near a teammate only waits: it has not explored."""
+    summary = {"why": "too little to see", "frontier_voxels": 23, "stands": 8, "best_gain_m3": 0.0776}
+    with mission_at_rest(tmp_path, duration_s=0.5) as (mission, _):
+        robot = mission.robots["rov0"]
+        robot.activity, robot.survey_ended_s, robot.explored = "idle", 20.0, False
+        robot.frontier, robot.frontier_frame_s = np.zeros((0, 7)), 21.0
+        robot.frontier_held, robot.frontier_summary = 2, {**summary, "why": ""}
+        mission._explore(robot, 22.0)
+        assert not robot.explored and robot.explored_why is None  # waiting for the teammate to move on
+        robot.frontier, robot.frontier_frame_s = np.zeros((0, 7)), 23.0
+        robot.frontier_held, robot.frontier_summary = 0, summary
+        mission._explore(robot, 24.0)
+        assert robot.explored
+        document = mission._write_final(30.0, time.perf_counter(), finished=False)
+    least = mission._look_params(robot).min_gain_m3
+    assert document["explored"]["rov0"] == {"t": 24.0, **summary, "min_gain_m3": least}
+    assert document["explored"]["rov1"] is None
+    (event,) = [e for e in read_events(tmp_path) if e["kind"] == "explored"]
+    assert (
+        event["robot"] == "rov0" and event["why"] == "too little to see" and event["best_gain_m3"] == 0.0776
+    )
+    report = (tmp_path / "report.md").read_text()
+    assert f"at 24 s: too little to see: the best look 0.078 m^3 of the {least:g} m^3" in report
+    assert "| rov1 | 0 | 0 | 0 | 0 | 0 | not explored |" in report
+    (tmp_path / "mission.json").unlink()  # the rebuild has the event log alone
+    rebuilt = rebuild(tmp_path, mission.scenario.tank)
+    assert rebuilt["explored"] == {"rov0": document["explored"]["rov0"]}

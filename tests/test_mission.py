@@ -427,6 +427,24 @@ def test_bad_mission_files_give_one_line_and_status_2(tmp_path, mission_table, m
     assert_one_line_error(maptidal_here("run", "--scenario", path, "--out", tmp_path / "o"), message)
 
 
+def test_run_takes_its_scenario_named_or_as_batch_takes_it(tmp_path):
+    """``maptidal run SCENARIO`` reads the file ``--scenario`` names (the same one-line refusal of its
+    bad [mission] table); the same file both ways is one scenario; two different files are refused."""
+    from maptidal.paths import asset
+
+    path = tmp_path / "bad.toml"
+    path.write_text(asset("scenarios", "mission.toml").read_text() + "\n[mission]\nspeed = 3\n")
+    out = tmp_path / "o"
+    assert_one_line_error(maptidal_here("run", path, "--out", out), "[mission] takes only")
+    assert_one_line_error(
+        maptidal_here("run", path, "--scenario", path, "--out", out), "[mission] takes only"
+    )
+    other = asset("scenarios", "mission.toml")
+    assert_one_line_error(
+        maptidal_here("run", path, "--scenario", other, "--out", out), "two scenarios given"
+    )
+
+
 def test_a_robot_outside_the_tank_is_refused(tmp_path):
     from maptidal.paths import asset
 

@@ -30,8 +30,12 @@ def register(commands) -> None:
         "report.md to --out as it goes. `make run` runs this.",
     )
     run.add_argument(
-        "--scenario", metavar="FILE", help="mission scenario TOML (default: assets/scenarios/mission.toml)"
+        "scenario_path",
+        nargs="?",
+        metavar="SCENARIO",
+        help="mission scenario TOML, as `maptidal batch` takes it (default: assets/scenarios/mission.toml)",
     )
+    run.add_argument("--scenario", metavar="FILE", help="the same, named (give one or the other)")
     run.add_argument(
         "--robots", type=positive_int, metavar="N", help="use the first N robots of the scenario"
     )
@@ -111,6 +115,12 @@ def register(commands) -> None:
         "scenario", nargs="?", metavar="SCENARIO", help="mission scenario TOML (default: mission.toml)"
     )
     batch.add_argument(
+        "--scenario",
+        dest="scenario_file",
+        metavar="FILE",
+        help="the same, named as `maptidal run` names it (give one or the other)",
+    )
+    batch.add_argument(
         "--seeds", default="1-10", metavar="SEEDS", help="N, N-M or a comma list (default %(default)s)"
     )
     batch.add_argument(
@@ -164,6 +174,14 @@ def register(commands) -> None:
     compare.set_defaults(handler=run_compare_batches)
 
 
+def one_scenario(positional: str | None, named: str | None) -> str | None:
+    """The scenario file a mission command was given, as ``SCENARIO`` or ``--scenario FILE`` (None: the
+    default); both, naming different files, is an error."""
+    if positional is not None and named is not None and positional != named:
+        raise ValueError(f"two scenarios given ({positional}, --scenario {named}): give one")
+    return named if named is not None else positional
+
+
 def run_mission(args: argparse.Namespace) -> int:
     """Handler of ``maptidal run``."""
     from maptidal.mission.config import prepare_mission
@@ -172,7 +190,7 @@ def run_mission(args: argparse.Namespace) -> int:
     from maptidal.progress import ProgressBar
 
     scenario, params = prepare_mission(
-        args.scenario,
+        one_scenario(args.scenario_path, args.scenario),
         args.robots,
         args.duration,
         args.pose,
@@ -239,11 +257,12 @@ def run_batch_command(args: argparse.Namespace) -> int:
     )
 
     check_executor_args(args)
+    scenario = one_scenario(args.scenario, args.scenario_file)
     seeds = parse_seeds(args.seeds)
     planners = parse_planners(args.planners) if args.planners else None
     jobs = jobs_for(args, len(seeds) * len(planners or [None]), "batch")
     rows, summary = run_batch(
-        args.scenario,
+        scenario,
         seeds,
         args.out,
         executor=args.executor,

@@ -314,7 +314,8 @@ def write_plots(root: Path, document: dict, views: np.ndarray, tank, occluded: t
         "band: occupation)",
         fontsize=9,
     )
-    axis.legend(fontsize=7, ncol=5, loc="upper center", bbox_to_anchor=(0.5, -0.3))
+    if axis.get_legend_handles_labels()[0]:  # a log with nothing flown yet has nothing to name
+        axis.legend(fontsize=7, ncol=5, loc="upper center", bbox_to_anchor=(0.5, -0.3))
     figure.tight_layout()
     save_png(figure, root / "timeline.png")
 
@@ -510,25 +511,44 @@ def time_use_lines(document: dict) -> list[str]:
     ]
 
 
+# what an ``explored`` event says of why (Mission._explore; maptidal.exploration.Exploration.summary)
+EXPLORED_FIELDS = ("why", "frontier_voxels", "stands", "best_gain_m3", "min_gain_m3")
+
+
+def explored_cell(info: dict | None) -> str:
+    """When a robot stopped exploring and why, for ``report.md`` (``mission.json``'s ``explored``: the
+    time, and the numbers of the search that found no look, :class:`maptidal.exploration.Exploration`)."""
+    if not info:
+        return "not explored"
+    why = info.get("why") or "no look left"
+    if why == "too little to see" and "best_gain_m3" in info:
+        least = info.get("min_gain_m3")
+        of = f" of the {least:g} m^3 a look must reveal" if least is not None else ""
+        why += f": the best look {info['best_gain_m3']:.3f} m^3{of}"
+    return f"at {info['t']:.0f} s: {why}"
+
+
 def survey_lines(document: dict) -> list[str]:
-    """``report.md``'s table of what each robot's surveys gave (``survey_outcomes``); none for a
-    document without surveys."""
+    """``report.md``'s table of what each robot's surveys gave (``survey_outcomes``) and when and why
+    it stopped exploring (``explored``); none for a document with neither surveys nor a robot explored."""
     outcomes = document.get("survey_outcomes") or {}
-    if not any(row["surveys"] for row in outcomes.values()):
+    explored = document.get("explored") or {}
+    if not any(row["surveys"] for row in outcomes.values()) and not any(explored.values()):
         return []
     rows = [
         f"| {name} | {row['surveys']} | {row['with_tasks']} | {row['timed_out']} | {row['seconds']:.0f} | "
-        f"{row['seconds_without_tasks']:.0f} |"
+        f"{row['seconds_without_tasks']:.0f} | {explored_cell(explored.get(name))} |"
         for name, row in outcomes.items()
     ]
     return [
         "## What the surveys found",
         "",
         "Each robot's surveys of its map's frontier, those whose frames found a task, those that ran out "
-        "their timeout, and the simulated seconds of all of them and of those that found none.",
+        "their timeout, the simulated seconds of all of them and of those that found none, and when and "
+        "why it stopped exploring (no look worth a trip: what ran out first).",
         "",
-        "| robot | surveys | found a task | timed out | seconds | seconds finding none |",
-        "|---|---|---|---|---|---|",
+        "| robot | surveys | found a task | timed out | seconds | seconds finding none | explored |",
+        "|---|---|---|---|---|---|---|",
         *rows,
         "",
     ]
@@ -768,6 +788,7 @@ def rebuild(root, tank) -> dict:
     views, view_times = [], []
     robots: dict[str, str] = {}
     done_by_robot: dict[str, dict[str, int]] = {}
+    explored: dict[str, dict] = {}
     for event in events:
         kind = event["kind"]
         if kind == "start":
@@ -805,6 +826,10 @@ def rebuild(root, tank) -> dict:
                 view_times.append(event["t"])
         elif kind == "fail":
             robots[event["robot"]] = "failed"
+        elif kind == "explored":
+            explored[event["robot"]] = {"t": event["t"]} | {
+                key: event[key] for key in EXPLORED_FIELDS if key in event
+            }
     inspections = Counter(e["task"] for e in events if e["kind"] == "done")
     document = {
         **snapshot,
@@ -821,6 +846,8 @@ def rebuild(root, tank) -> dict:
         "tasks": sorted(tasks.values(), key=lambda t: t["id"]),
         "done_by_robot": done_by_robot,
     }
+    if explored:
+        document["explored"] = {**snapshot.get("explored", {}), **explored}
     document.pop("video", None)
     if (root / "mission.mp4").is_file():
         document["video"] = {"file": "mission.mp4", **snapshot.get("video", {}), "partial": False}

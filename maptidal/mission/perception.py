@@ -26,7 +26,7 @@ import numpy as np
 
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
 from maptidal.executors import release_in_child, signals_held
-from maptidal.exploration import FrontierParams, explore_views
+from maptidal.exploration import FrontierParams, explore, explore_views
 from maptidal.map_discovery import RobotMap, discover_on_map, gap_views, views_left_to_take
 from maptidal.perception.dense import dense_points
 from maptidal.perception.frontend import FrontEnd
@@ -107,6 +107,9 @@ class FrameResult:
     # with no look left: views of what the map holds that no known view holds
     # (maptidal.map_discovery.gap_views)
     gap_tasks: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    # the search that gave ``frontier``, in numbers (maptidal.exploration.Exploration.summary): with no
+    # look, why
+    exploration: dict | None = None
 
 
 def perceive(
@@ -173,13 +176,14 @@ def perceive(
         discovery_s = time.perf_counter() - start
     else:
         discovery_s = 0.0
-    frontier, held_for_teammates, gaps = None, 0, np.zeros((0, 6))
+    frontier, held_for_teammates, gaps, exploration = None, 0, np.zeros((0, 6)), None
     if job.explore is not None and robot_map is not None:
         start = time.perf_counter()
         request = job.explore
-        frontier = explore_views(
+        search = explore(
             robot_map, job.pose.position, request.params, request.launch, job.teammates, request.visited
         )
+        frontier, exploration = search.views, search.summary()
         if len(frontier) == 0 and job.teammates is not None and len(job.teammates):
             # none left but near a teammate: the robot waits for it to move on, it has not explored
             alone = explore_views(
@@ -208,6 +212,7 @@ def perceive(
         held_for_teammates,
         retired,
         gaps,
+        exploration,
     )
 
 

@@ -562,6 +562,10 @@ class _Robot:
     frontier: np.ndarray | None = None
     frontier_frame_s: float = -math.inf
     frontier_held: int = 0  # with no look left: how many were left out for being near a teammate
+    # the search that gave ``frontier`` in numbers (maptidal.exploration.Exploration.summary), and, once
+    # it has explored, when and why (the search that found no look), for its event and mission.json
+    frontier_summary: dict | None = None
+    explored_why: dict | None = None
     survey_log: list = field(default_factory=list)
     time_use: TimeUse = field(default_factory=TimeUse)  # where its mission time went
     survey_ended_s: float = -math.inf
@@ -1390,6 +1394,7 @@ class Mission:
         if result.frontier is not None:
             robot.frontier, robot.frontier_frame_s = result.frontier, result.time_s
             robot.frontier_held = result.held_for_teammates
+            robot.frontier_summary = result.exploration
         if result.faces:  # a keyframe: its review stands for the path as it was then
             robot.covered = {int(key) for key in result.retired}
         if self.params.planner != "maptidal":
@@ -1446,7 +1451,8 @@ class Mission:
                 robot.survey_ended_s = now  # its next looks are worked out on the sweep's views
                 if not self.params.exploring:
                     robot.explored = True
-                    self.writer.event(now, "explored", robot=robot.name)
+                    robot.explored_why = {"t": round(now, 3), "why": "not exploring: its first sweep only"}
+                    self.writer.event(now, "explored", robot=robot.name, why=robot.explored_why["why"])
             return
         if robot.activity == "survey":
             timed_out = now - robot.task_started_s > self.params.task_timeout_s
@@ -1598,7 +1604,10 @@ class Mission:
             return
         if not robot.has_dvl and not self.params.survey_without_dvl:
             robot.explored = True  # the frontier is its teammates' (survey_without_dvl)
-            self.writer.event(now, "explored", robot=robot.name, surveys=0, without_dvl=True)
+            robot.explored_why = {"t": round(now, 3), "why": "no DVL: its teammates explore"}
+            self.writer.event(
+                now, "explored", robot=robot.name, surveys=0, without_dvl=True, why=robot.explored_why["why"]
+            )
             return
         if robot.frontier is None or robot.frontier_frame_s < robot.survey_ended_s:
             return  # its next looks are on their way (``_explore_request``)
@@ -1607,7 +1616,11 @@ class Mission:
                 robot.frontier = None  # its looks are by a teammate: wait for it to move on, and ask again
                 return
             robot.explored = True
-            self.writer.event(now, "explored", robot=robot.name, surveys=len(robot.surveyed))
+            why = dict(robot.frontier_summary or {})
+            if why:
+                why["min_gain_m3"] = self._look_params(robot).min_gain_m3
+            robot.explored_why = {"t": round(now, 3), **why}
+            self.writer.event(now, "explored", robot=robot.name, surveys=len(robot.surveyed), **why)
             return
         x, y, z, yaw, pitch, gain, _ = robot.frontier[0]
         look = np.array([x, y, z])  # where the vehicle's centre stands for the look
@@ -1798,6 +1811,8 @@ class Mission:
             "surveys": {r.name: len(r.surveyed) for r in self.robots.values()},
             # how many of them found a task on their frames, and the seconds of those that found none
             "survey_outcomes": {r.name: survey_outcomes(r.survey_log, now) for r in self.robots.values()},
+            # when each robot stopped exploring, and why: the numbers of its last search for a look
+            "explored": {r.name: r.explored_why for r in self.robots.values()},
             # where each robot's time went: seconds per occupation, and its spans (time_use)
             "time_use": {r.name: r.time_use.as_dict(now) for r in self.robots.values()},
             "comms": {
