@@ -371,10 +371,10 @@ class Exploration:
     views: the looks, rows as :func:`explore_views` returns them; frontier_voxels: the unknown voxels
     bordering seen water in the counted box; stands: the places a look could stand, after every rule;
     best_gain_m3: the largest gain of any look weighed, worth a trip or not (0 when none was weighed);
-    why: "" with looks, else what ran out first: "no water seen", "no frontier", "no stand" (none clear
-    of the map, the surface, the floor, the teammates and the places surveyed), "no stand near the
-    frontier" (none within a cell of it), or "too little to see" (every look's gain under
-    ``min_gain_m3``)."""
+    why: "" with looks, else what ran out first: "no water seen", "no position" (not finite), "no
+    frontier", "no stand" (none clear of the map, the surface, the floor, the teammates and the places
+    surveyed), "no stand near the frontier" (none within a cell of it), or "too little to see" (every
+    look's gain under ``min_gain_m3``)."""
 
     views: np.ndarray
     frontier_voxels: int = 0
@@ -426,7 +426,7 @@ def explore(
         return Exploration(empty, why="no water seen")
     position = np.asarray(position, float).reshape(3)
     if not np.all(np.isfinite(position)):
-        return Exploration(empty, why="no water seen")
+        return Exploration(empty, why="no position")  # a robot that does not know where it is
     grid = voxel_states(robot_map, params, launch, pad_m=params.view_range_m)
     frontier = grid.centres(_frontier(grid))
     if len(frontier) == 0:

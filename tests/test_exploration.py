@@ -385,6 +385,7 @@ def test_a_search_with_no_look_says_what_ran_out_first():
     assert explore(RobotMap(MapAwareParams()), camera).why == "no water seen"
     robot_map = RobotMap(MapAwareParams(surface_z=2.0))
     _look(robot_map, camera, 0.0, walls)
+    assert explore(robot_map, camera + [np.nan, 0.0, 0.0], launch=camera).why == "no position"
     found = explore(robot_map, camera, launch=camera)
     assert found.why == "" and len(found.views) and found.stands > 0 and found.frontier_voxels > 0
     np.testing.assert_array_equal(found.views, explore_views(robot_map, camera, launch=camera))

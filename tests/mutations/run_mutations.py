@@ -71,6 +71,7 @@ EXPLORE_TESTS = [
     "tests/test_loop_discovery.py::test_with_survey_without_dvl_off_only_the_robots_with_a_dvl_survey",
     "tests/test_loop_discovery.py::test_each_robot_sweeps_as_wide_and_as_fast_as_its_settings_say",
     "tests/test_loop_discovery.py::test_a_robot_that_can_pitch_asks_for_pitched_looks_and_holds_the_pitch_through_the_sweep",
+    "tests/test_loop_discovery.py::test_a_robot_that_has_explored_says_when_and_why",
 ]
 TIME_USE_TESTS = [
     "tests/test_time_use.py",
@@ -1874,6 +1875,30 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "robot.route = Route(self._sweep(here, yaw))",
                 "robot.route = Route(sweep_legs(here, yaw, math.radians(self.params.explore_yaw_deg), "
                 "self._sweep_limits(robot)))",
+            )
+        ],
+    ),
+    "Y17": (
+        "a search with no look counts only the looks worth a trip for its best gain",
+        [
+            (
+                "maptidal/exploration.py",
+                "best_gain = float(gain.max()) if len(gain) else 0.0",
+                "best_gain = float(rows[:, 5].max()) if len(rows) else 0.0",
+            )
+        ],
+    ),
+    "Y18": (
+        "a robot that has explored does not say why",
+        [("maptidal/mission/run.py", "why = dict(robot.frontier_summary or {})", "why = {}")],
+    ),
+    "Y19": (
+        "the report's rebuild forgets why a robot stopped exploring",
+        [
+            (
+                "maptidal/mission/outputs.py",
+                '    if explored:\n        document["explored"]',
+                '    if False:\n        document["explored"]',
             )
         ],
     ),
