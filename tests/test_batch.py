@@ -24,6 +24,8 @@ from maptidal.mission.batch import (
     aggregate,
     batch_markdown,
     coverage_bands,
+    exploring_ends,
+    exploring_ends_markdown,
     mission_metrics,
     parse_planners,
     parse_seeds,
@@ -250,6 +252,9 @@ def test_each_planner_flies_each_seed_and_the_table_sets_them_side_by_side(tmp_p
         assert row["time_use"] == {name: use["seconds"] for name, use in document["time_use"].items()}
         for robot in row["time_use"]:
             assert f"| {row['planner']}, {robot} |" in table
+        # why each robot stopped exploring, as its mission says (None: it had not)
+        explored = document["explored"]
+        assert row["explored"] == {name: info and info["why"] for name, info in explored.items()}
     assert (tmp_path / "time_use.png").stat().st_size > 0
 
 
@@ -269,6 +274,30 @@ def test_the_time_use_means_are_per_planner_and_robot_with_a_missing_occupation_
     assert "| planner, robot | first sweep | surveying | tasks | lost |" in table
     assert "| a, r1 | 0 | 0 | 0 | 6 |" in table and "| b, r0 | 0 | 0 | 5 | 0 |" in table
     assert time_use_markdown({}) == []
+
+
+def test_why_the_robots_stopped_exploring_is_counted_per_planner_and_robot():
+    """exploring_ends: per planner and robot, the missions per reason (a robot that never stopped is
+    "not explored"); the table lists the reasons most frequent first, and nothing without any."""
+    rows = [
+        {"planner": "maptidal", "explored": {"r0": "too little to see", "r1": "no stand"}},
+        {"planner": "maptidal", "explored": {"r0": "too little to see", "r1": None}},
+        {"planner": "maptidal", "explored": {"r0": "no stand", "r1": "no stand"}},
+        {"planner": "voronoi", "explored": {"r0": "not exploring: its first sweep only"}},
+        {"planner": "voronoi"},  # a row from before the explored record: nothing to count
+    ]
+    ends = exploring_ends(rows)
+    assert ends == {
+        "maptidal": {
+            "r0": {"too little to see": 2, "no stand": 1},
+            "r1": {"no stand": 2, "not explored": 1},
+        },
+        "voronoi": {"r0": {"not exploring: its first sweep only": 1}},
+    }
+    table = "\n".join(exploring_ends_markdown(ends))
+    assert "| maptidal, r0 | too little to see 2, no stand 1 |" in table
+    assert "| maptidal, r1 | no stand 2, not explored 1 |" in table
+    assert exploring_ends_markdown({}) == [] and exploring_ends([{"planner": "a"}]) == {}
 
 
 def test_a_bad_mission_file_fails_before_any_run(tmp_path):

@@ -10,8 +10,9 @@ lands:
   deviation, minimum and maximum of every metric), ``batch.md`` (the same as a table), ``batch.png`` (a
   panel per metric, every seed a dot) and ``coverage_time.png`` (the walls' inspected share against
   time: the mean over seeds and a band of one standard deviation, each mission held at its last value
-  after it ends), and ``time_use.png`` with ``batch.md``'s last table (where each robot's time went:
-  the mean seconds of each occupation, per planner and robot).
+  after it ends), and ``time_use.png`` with ``batch.md``'s table of where each robot's time went (the
+  mean seconds of each occupation, per planner and robot); ``batch.md`` ends with why each robot
+  stopped exploring (the missions per reason, :func:`exploring_ends`).
 
 With several planners (``--planners maptidal,voronoi,boustrophedon`` or ``all``) every planner flies
 every seed, each in ``PLANNER/seed_NNN/``; the rows carry the planner, ``batch.json``'s summary is one
@@ -156,6 +157,11 @@ def run_one(run: BatchRun) -> dict:
         "coverage_timeline": document.get("coverage_timeline", [[0.0, 0.0]]),
         # where each robot's time went, seconds per occupation (maptidal.mission.time_use)
         "time_use": {name: use["seconds"] for name, use in document.get("time_use", {}).items()},
+        # why each robot stopped exploring (mission.json's explored; None: it had not)
+        "explored": {
+            name: None if info is None else info.get("why") or "explored"
+            for name, info in (document.get("explored") or {}).items()
+        },
     }
 
 
@@ -217,6 +223,44 @@ def time_use_markdown(means: dict[str, dict[str, dict[str, float]]]) -> list[str
     ]
 
 
+def exploring_ends(rows: list[dict]) -> dict[str, dict[str, dict[str, int]]]:
+    """Per planner and robot, how many missions ended its exploring for each reason (the rows'
+    ``explored``, from ``mission.json``: :class:`maptidal.exploration.Exploration`'s ``why``), and how
+    many it never ended ("not explored")."""
+    ends: dict[str, dict[str, dict[str, int]]] = {}
+    for row in rows:
+        for robot, why in (row.get("explored") or {}).items():
+            counts = ends.setdefault(str(row.get("planner")), {}).setdefault(robot, {})
+            reason = why or "not explored"
+            counts[reason] = counts.get(reason, 0) + 1
+    return ends
+
+
+def exploring_ends_markdown(ends: dict[str, dict[str, dict[str, int]]]) -> list[str]:
+    """``batch.md``'s table of why each robot stopped exploring, a row per planner and robot, the reasons
+    most frequent first; none without any."""
+    rows = [
+        f"| {planner}, {robot} | "
+        + ", ".join(f"{why} {n}" for why, n in sorted(counts.items(), key=lambda item: (-item[1], item[0])))
+        + " |"
+        for planner, robots in ends.items()
+        for robot, counts in robots.items()
+    ]
+    if not rows:
+        return []
+    return [
+        "## Why the robots stopped exploring",
+        "",
+        "Missions per reason: what each robot's last search for a look ran out of first (the `explored` "
+        "event; maptidal/exploration.py).",
+        "",
+        "| planner, robot | reasons (missions) |",
+        "|---|---|",
+        *rows,
+        "",
+    ]
+
+
 def plot_time_use(means: dict[str, dict[str, dict[str, float]]], path: Path) -> None:
     """Where each robot's time went: a bar per planner and robot, its mean seconds stacked by occupation."""
     import matplotlib
@@ -253,9 +297,10 @@ def batch_csv(rows: list[dict]) -> str:
     return buffer.getvalue()
 
 
-def batch_markdown(summary: dict, runs: int, time_use: dict | None = None) -> str:
+def batch_markdown(summary: dict, runs: int, time_use: dict | None = None, ends: dict | None = None) -> str:
     """The aggregate as a markdown table: metric, mean, spread, range; then where each robot's time went
-    (``time_use``, :func:`time_use_means`), when given."""
+    (``time_use``, :func:`time_use_means`) and why each stopped exploring (``ends``,
+    :func:`exploring_ends`), when given."""
     lines = [
         f"# Map-TIDAL missions: {runs} seeds",
         "",
@@ -274,7 +319,7 @@ def batch_markdown(summary: dict, runs: int, time_use: dict | None = None) -> st
             f"| {figures['min']:.3g} | {figures['max']:.3g} |"
         )
     lines += ["", "![every seed](batch.png)", "", "![coverage against time](coverage_time.png)", ""]
-    return "\n".join([*lines, *time_use_markdown(time_use or {})])
+    return "\n".join([*lines, *time_use_markdown(time_use or {}), *exploring_ends_markdown(ends or {})])
 
 
 def _of(figures: dict, runs: int) -> str:
@@ -284,12 +329,17 @@ def _of(figures: dict, runs: int) -> str:
 
 
 def planners_markdown(
-    summaries: dict[str, dict], runs: int, time_use: dict | None = None, rows: list[dict] | None = None
+    summaries: dict[str, dict],
+    runs: int,
+    time_use: dict | None = None,
+    rows: list[dict] | None = None,
+    ends: dict | None = None,
 ) -> str:
     """Several planners' aggregates side by side: each metric's mean +- std per planner; then, given the
     ``rows``, each planner against Map-TIDAL seed by seed, with the mean difference's confidence interval
     (:func:`maptidal.mission.batch_compare.planners_pairs_markdown`); then where each robot's time went
-    (``time_use``, :func:`time_use_means`), when given."""
+    (``time_use``, :func:`time_use_means`) and why each stopped exploring (``ends``, :func:`exploring_ends`),
+    when given."""
     planners = list(summaries)
     lines = [
         f"# Planners flown in the loop: {', '.join(planners)}, {runs} seeds each",
@@ -320,7 +370,9 @@ def planners_markdown(
         "",
     ]
     pairs = planners_pairs_markdown(rows) if rows else []
-    return "\n".join([*lines, *pairs, *time_use_markdown(time_use or {})])
+    return "\n".join(
+        [*lines, *pairs, *time_use_markdown(time_use or {}), *exploring_ends_markdown(ends or {})]
+    )
 
 
 def plot_batch(rows: list[dict], path: Path) -> None:
@@ -464,12 +516,13 @@ def run_batch(
         bar.advance(note=f"seed {row['seed']}: {row['tasks_done']}/{row['tasks_found']} tasks done")
     rows = [results[k] for k in sorted(results)]
     time_use = time_use_means(rows)
+    ends = exploring_ends(rows)
     if several:
         summary = {p: aggregate([row for row in rows if row["planner"] == p]) for p in planners}
-        markdown = planners_markdown(summary, len(seeds), time_use, rows)
+        markdown = planners_markdown(summary, len(seeds), time_use, rows, ends)
     else:
         summary = aggregate(rows)
-        markdown = batch_markdown(summary, len(rows), time_use)
+        markdown = batch_markdown(summary, len(rows), time_use, ends)
     atomic_write_json(out / "batch.json", {"executor": executor, "rows": rows, "summary": summary})
     atomic_write_text(out / "batch.md", markdown)
     plot_batch(rows, out / "batch.png")

@@ -72,6 +72,7 @@ EXPLORE_TESTS = [
     "tests/test_loop_discovery.py::test_each_robot_sweeps_as_wide_and_as_fast_as_its_settings_say",
     "tests/test_loop_discovery.py::test_a_robot_that_can_pitch_asks_for_pitched_looks_and_holds_the_pitch_through_the_sweep",
     "tests/test_loop_discovery.py::test_a_robot_that_has_explored_says_when_and_why",
+    "tests/test_batch.py::test_why_the_robots_stopped_exploring_is_counted_per_planner_and_robot",
 ]
 TIME_USE_TESTS = [
     "tests/test_time_use.py",
@@ -1899,6 +1900,16 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "maptidal/mission/outputs.py",
                 '    if explored:\n        document["explored"]',
                 '    if False:\n        document["explored"]',
+            )
+        ],
+    ),
+    "Y20": (
+        "a batch counts each robot's reasons once for the whole batch, not per mission",
+        [
+            (
+                "maptidal/mission/batch.py",
+                "counts[reason] = counts.get(reason, 0) + 1",
+                "counts[reason] = 1",
             )
         ],
     ),
