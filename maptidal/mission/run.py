@@ -1450,9 +1450,7 @@ class Mission:
                 robot.activity = "idle"
                 robot.survey_ended_s = now  # its next looks are worked out on the sweep's views
                 if not self.params.exploring:
-                    robot.explored = True
-                    robot.explored_why = {"t": round(now, 3), "why": "not exploring: its first sweep only"}
-                    self.writer.event(now, "explored", robot=robot.name, why=robot.explored_why["why"])
+                    self._has_explored(robot, now, {"why": "not exploring: its first sweep only"})
             return
         if robot.activity == "survey":
             timed_out = now - robot.task_started_s > self.params.task_timeout_s
@@ -1603,10 +1601,9 @@ class Mission:
         if not self.params.exploring or robot.explored:
             return
         if not robot.has_dvl and not self.params.survey_without_dvl:
-            robot.explored = True  # the frontier is its teammates' (survey_without_dvl)
-            robot.explored_why = {"t": round(now, 3), "why": "no DVL: its teammates explore"}
-            self.writer.event(
-                now, "explored", robot=robot.name, surveys=0, without_dvl=True, why=robot.explored_why["why"]
+            # the frontier is its teammates' (survey_without_dvl)
+            self._has_explored(
+                robot, now, {"why": "no DVL: its teammates explore"}, surveys=0, without_dvl=True
             )
             return
         if robot.frontier is None or robot.frontier_frame_s < robot.survey_ended_s:
@@ -1615,12 +1612,10 @@ class Mission:
             if robot.frontier_held and now - robot.survey_ended_s <= self.params.task_timeout_s:
                 robot.frontier = None  # its looks are by a teammate: wait for it to move on, and ask again
                 return
-            robot.explored = True
             why = dict(robot.frontier_summary or {})
             if why:
                 why["min_gain_m3"] = self._look_params(robot).min_gain_m3
-            robot.explored_why = {"t": round(now, 3), **why}
-            self.writer.event(now, "explored", robot=robot.name, surveys=len(robot.surveyed), **why)
+            self._has_explored(robot, now, why, surveys=len(robot.surveyed))
             return
         x, y, z, yaw, pitch, gain, _ = robot.frontier[0]
         look = np.array([x, y, z])  # where the vehicle's centre stands for the look
@@ -1657,6 +1652,13 @@ class Mission:
             pitch_deg=round(math.degrees(pitch), 1),
             gain_m3=round(float(gain), 3),
         )
+
+    def _has_explored(self, robot: _Robot, now: float, why: dict, **fields) -> None:
+        """``robot`` has explored: ``why`` (the reason, and the numbers of the search that found no look)
+        goes to its ``explored_why`` (mission.json) and, with ``fields``, to its ``explored`` event."""
+        robot.explored = True
+        robot.explored_why = {"t": round(now, 3), **why}
+        self.writer.event(now, "explored", robot=robot.name, **fields, **why)
 
     def _capture(self, robot: _Robot, key: int, now: float) -> None:
         # the image of this moment, drawn and written on the GL thread while the physics steps on
