@@ -187,3 +187,36 @@ def test_a_tank_config_written_out_reads_back_the_same(path):
     assert written["water_depth"] == document["water_depth"]
     with_baseline = dataclasses.replace(config, side_baseline_length=0.3)
     assert tank_config_from_dict(tank_config_to_dict(with_baseline)) == with_baseline
+
+
+def test_the_random_tanks_bench_draws_valid_tanks_whose_window_clears_the_ladder():
+    """tests/bench/random_tanks.py's draws stay in their ranges, validate as tanks, and never put the
+    window over the ladder (checked on the built model's geometry: the window's edges against the
+    ladder's boxes, along the end wall)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent / "bench"))
+    import random_tanks
+
+    from maptidal.tank import TankModel, tank_config_from_dict
+
+    rng = np.random.default_rng(3)
+    windows = 0
+    for index in range(60):
+        document = random_tanks.draw_tank(rng, index)
+        config = tank_config_from_dict(document)  # raises on an invalid tank
+        assert random_tanks.WIDTH_M[0] <= config.end_wall_width <= random_tanks.WIDTH_M[1]
+        assert random_tanks.DEPTH_M[0] <= config.water_depth <= random_tanks.DEPTH_M[1]
+        model = TankModel(config)
+        if not model.has_window():
+            continue
+        windows += 1
+        window = config.window
+        left, right = window.centre_offset - window.width / 2, window.centre_offset + window.width / 2
+        wall = model.segment("end")
+        middle = np.array([*wall.start[:2], 0.0]) + wall.length / 2 * wall.tangent
+        for centre, half, axes in model.ladder_boxes():
+            along = float((centre - middle) @ axes[0])  # axes[0]: along the end wall, as offsets run
+            reach = float(half[0])
+            assert along + reach <= left or along - reach >= right, (index, along, left, right)
+    assert 20 < windows < 60  # some tanks have a window, some none
