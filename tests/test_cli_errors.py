@@ -44,6 +44,7 @@ def files(tmp_path_factory) -> dict[str, Path]:
     (root / "never_lost.toml").write_text(before_mission + "[mission]\nlost_after_s = -1.0\n")
     (root / "unsure.toml").write_text(before_mission + "[mission]\nlost_sigma_m = nan\n")
     (root / "give_up_half.toml").write_text(before_mission + "[mission]\nlost_give_up = 1.5\n")
+    (root / "clear_never.toml").write_text(before_mission + "[mission]\nclear_after_s = -0.5\n")
     (root / "fast_current.toml").write_text(
         before_mission
         + '[mission]\n[[mission.events]]\ntime_s = 2\nkind = "current"\ncurrent = [1e6, 0, 0]\n'
@@ -92,6 +93,7 @@ CASES = [
     ("lost after -1 s", "run --scenario {never_lost} --out {root}/n", "lost_after_s must be positive"),
     ("lost beyond nan", "run --scenario {unsure} --out {root}/u", "lost_sigma_m must be positive"),
     ("give up after 1.5 losses", "run --scenario {give_up_half} --out {root}/g", "lost_give_up must be"),
+    ("clear after -0.5 s", "run --scenario {clear_never} --out {root}/cl", "clear_after_s must be"),
     (
         "frames at 51 Hz",
         "run --scenario {fast_frames} --out {root}/f",

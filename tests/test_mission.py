@@ -742,9 +742,39 @@ def test_a_robot_keeps_clear_of_a_teammate_it_has_heard_from(tmp_path):
     assert mission._keep_clear(rov0, near, now=12.0) is near
     # and a position heard too long ago counts for nothing
     assert mission._keep_clear(rov1, near, now=41.0) is near
+    assert mission._keep_clear(rov0, near, now=12.6) is near  # clear for clear_after_s: the spell ends
     kinds = [(e["robot"], e["kind"]) for e in read_events(tmp_path)]
     assert kinds.count(("rov1", "yielding")) == 1 and kinds.count(("rov1", "clear")) == 1
     assert kinds.count(("rov0", "yielding")) == 1 and kinds.count(("rov0", "clear")) == 1
+    mission.sim.close()
+
+
+def test_a_spell_of_giving_way_broken_for_less_than_clear_after_s_is_one_spell(tmp_path):
+    """A robot backing out of a teammate that comes on towards it is clear, then inside its ball again,
+    every few control periods: its events and time use count one spell until its way has been clear
+    for clear_after_s; its reference is the clear way's at once all the same."""
+    from maptidal.controllers.trajectory import PoseReference
+
+    scenario, _ = load_mission(None)
+    params = MissionParams(duration_s=1.0, clearance_m=1.0, clear_after_s=0.5, plots=False)
+    mission = Mission(scenario, params, tmp_path)
+    rov1 = mission.robots["rov1"]
+    teammate = np.array([0.0, 0.0, 1.0])
+    mission.auction.agents[rov1.index].peer_positions[0] = (teammate, 10.0)
+    _placed(mission, {"rov0": [3.0, 0.0, 1.0], "rov1": [3.0, 0.0, 1.0]})
+    blocked = PoseReference(np.array([-2.0, 0.0, 1.0]), np.zeros(3), np.zeros(3), 0.0, 0.0)
+    clear = PoseReference(np.array([4.0, 0.0, 1.0]), np.zeros(3), np.zeros(3), 0.0, 0.0)
+    spell = [(10.0, blocked), (10.2, clear), (10.4, blocked), (10.5, clear), (10.9, clear), (11.0, clear)]
+    flags = []
+    for now, reference in spell:
+        held = mission._keep_clear(rov1, reference, now=now)
+        assert (held is reference) == (reference is clear)  # the flight never waits on the spell
+        flags.append(rov1.giving_way)
+        mission._count_time_use(now, 0.1)
+    assert flags == [True, True, True, True, True, False]  # clear from 10.5, for 0.5 s at 11.0
+    events = [(e["kind"], e["t"]) for e in read_events(tmp_path) if e.get("robot") == "rov1"]
+    assert [e for e in events if e[0] in ("yielding", "clear")] == [("yielding", 10.0), ("clear", 11.0)]
+    assert rov1.time_use.seconds["giving way"] == pytest.approx(0.5)
     mission.sim.close()
 
 

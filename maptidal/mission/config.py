@@ -8,7 +8,8 @@
     motion_model_error = 0.0    # how far off the estimators' motion models are (0: exact, 0.3: 30 %)
     relocalise = true      # a robot without a DVL relocalises against its own map (false: it does not)
     command_rate_hz = 10.0 # go-to-pose's pilot commands per second
-    clearance_m = 1.0      # how far a robot keeps from lower-indexed teammates (0: not at all)
+    clearance_m = 1.0      # how far a robot keeps from its teammates and their ways (0: not at all)
+    clear_after_s = 0.5    # a spell of giving way ends once the way has been clear this long (events)
     lost_after_s = 3.0     # a robot without a DVL is lost after this long without a visual fix ...
     lost_sigma_m = 0.15    # ... or when more unsure of its position than this
     watch_pushes = false   # true: the accelerometer against the motion model grows the uncertainty of a
@@ -85,6 +86,7 @@ MISSION_KEYS = {
     "relocalise",
     "command_rate_hz",
     "clearance_m",
+    "clear_after_s",
     "lost_after_s",
     "lost_sigma_m",
     "watch_pushes",

@@ -207,6 +207,11 @@ class MissionParams:
     # the other's hull), and two robots never wait on each other for longer than a message takes
     clearance_m: float = 1.0
     peer_fresh_s: float = 30.0
+    # a spell of giving way ends once the robot's way has stayed clear this long: one backing out of a
+    # teammate that comes on towards it is clear, then inside the ball again, every few control periods
+    # (in session 43's missions a third of the spells began within 0.3 s of the last one's end); the
+    # event log and the time use count such a spell once. Its flight is the same either way
+    clear_after_s: float = 0.5
     image_size: tuple[int, int] = (320, 200)
     # the images' multisample anti-aliasing (Simulation's render_samples): 4, MuJoCo's default, stands
     # for the lens's blur; 0 halves the render time on Mesa's CPU rasteriser (README, "Closed-loop mission")
@@ -407,6 +412,12 @@ class MissionParams:
             raise ValueError(f"sweep_rate_dvl_deg_s must be positive, got {self.sweep_rate_dvl_deg_s!r}")
         if not (math.isfinite(self.motion_model_error) and 0 <= self.motion_model_error < 1):
             raise ValueError(f"motion_model_error must be in [0, 1), got {self.motion_model_error!r}")
+        if not (
+            isinstance(self.clear_after_s, int | float)
+            and math.isfinite(self.clear_after_s)
+            and self.clear_after_s >= 0
+        ):
+            raise ValueError(f"clear_after_s must be a number of seconds >= 0, got {self.clear_after_s!r}")
         if not (math.isfinite(self.lost_after_s) and self.lost_after_s > 0):
             raise ValueError(f"lost_after_s must be positive, got {self.lost_after_s!r}")
         if not (math.isfinite(self.lost_sigma_m) and self.lost_sigma_m > 0):
@@ -592,6 +603,10 @@ class _Robot:
     lost_since_s: float = 0.0
     lost_at_s: float = 0.0  # when it was last found lost
     yielding: bool = False  # holding its reference out of a teammate's clearance
+    # in a spell of giving way (its events and time use): from its first yielding until its way has
+    # been clear for clear_after_s (MissionParams), since clear_since_s
+    giving_way: bool = False
+    clear_since_s: float | None = None
     referenced_s: float | None = (
         None  # when its reference was last worked out (its route pauses while yielding)
     )
@@ -967,7 +982,7 @@ class Mission:
         """Give the control period just flown (``elapsed_s``, ending at ``now``) to each robot's
         occupation in it (:mod:`maptidal.mission.time_use`)."""
         for robot in self.robots.values():
-            kind = occupation(robot.activity, robot.lost, robot.yielding, robot.explored)
+            kind = occupation(robot.activity, robot.lost, robot.giving_way, robot.explored)
             robot.time_use.add(now, elapsed_s, kind)
 
     def _teammates_heard(self, robot: _Robot, now: float) -> np.ndarray:
@@ -1011,19 +1026,29 @@ class Mission:
             shapes = [self._teammate_way(agent, peer, position, now) for peer, position in peers]
             here = self._estimate(robot).position
             stop = waiting_point(here, reference.position, shapes, self.params.clearance_m)
-        agent.giving_way = stop is not None
+        agent.giving_way = robot.yielding = stop is not None
+        self._log_giving_way(robot, None if stop is None else peers[stop[1]][0], now)
         if stop is None:
-            if robot.yielding:
-                robot.yielding = False
-                self.writer.event(now, "clear", robot=robot.name)
             return reference
-        point, blocking = stop
-        if not robot.yielding:
-            robot.yielding = True
-            self.writer.event(
-                now, "yielding", robot=robot.name, to=self.robots_by_index[peers[blocking][0]].name
-            )
-        return PoseReference(point, np.zeros(3), np.zeros(3), reference.yaw, reference.yaw_rate)
+        return PoseReference(stop[0], np.zeros(3), np.zeros(3), reference.yaw, reference.yaw_rate)
+
+    def _log_giving_way(self, robot: _Robot, blocking: int | None, now: float) -> None:
+        """The ``yielding`` event when a spell of giving way begins (``blocking``: the teammate's index,
+        None while the way is clear), and ``clear`` once the way has stayed clear for ``clear_after_s``
+        (MissionParams): a spell broken for less is one spell."""
+        if blocking is not None:
+            robot.clear_since_s = None
+            if not robot.giving_way:
+                robot.giving_way = True
+                self.writer.event(now, "yielding", robot=robot.name, to=self.robots_by_index[blocking].name)
+            return
+        if not robot.giving_way:
+            return
+        if robot.clear_since_s is None:
+            robot.clear_since_s = now
+        if now - robot.clear_since_s >= self.params.clear_after_s:
+            robot.giving_way, robot.clear_since_s = False, None
+            self.writer.event(now, "clear", robot=robot.name)
 
     def _bound_for(self, robot: _Robot) -> np.ndarray | None:
         """Where the robot is bound, for its messages: the end of the route it flies (its way home when
