@@ -45,9 +45,9 @@ test: setup
 	$(BIN)/python -m compileall -q maptidal envs controllers tests > /dev/null
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) $(if $(filter 0,$(TEST_WORKERS)),,--dist loadscope --no-loadscope-reorder)
 
-# the tests against real ArduSub firmware: ARDUSUB_SITL=/path/to/ardusub make sitl-test (README, SITL)
+# the tests against real ArduSub firmware: ARDUSUB_SITL=/path/to/ardusub make sitl-test (docs/mavlink.md, SITL)
 sitl-test: setup
-	@test -n "$$ARDUSUB_SITL" || { echo "set ARDUSUB_SITL to an ArduSub SITL binary (README: ArduSub SITL on our physics)"; exit 2; }
+	@test -n "$$ARDUSUB_SITL" || { echo "set ARDUSUB_SITL to an ArduSub SITL binary (docs/mavlink.md: ArduSub SITL on our physics)"; exit 2; }
 	$(BIN)/python -m pytest -q -m sitl
 
 bench: setup

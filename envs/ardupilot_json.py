@@ -179,7 +179,7 @@ class JsonBackend:
                     noticed = True
                     self._event(
                         f"no servo packets from ArduPilot SITL on UDP port {self.port} after "
-                        f"{notice_after_s:g} s: start it with --model JSON (README, ArduSub SITL)"
+                        f"{notice_after_s:g} s: start it with --model JSON (docs/mavlink.md, ArduSub SITL)"
                     )
                 if idle_timeout_s is not None and idle >= idle_timeout_s:
                     self._event(f"no servo packet for {idle_timeout_s:g} s: stopped")

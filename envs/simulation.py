@@ -212,7 +212,7 @@ class Simulation:
         spec = compose(self.scenario.tank, placements, self.scenario.timestep_s, camera=self.camera)
         self.model = spec.compile()
         # multisample anti-aliasing of the off-screen images: 4 (MuJoCo's default) stands for a lens's
-        # blur; 0 halves the render time on a CPU rasteriser, with jagged edges (README, mission speed)
+        # blur; 0 halves the render time on a CPU rasteriser, with jagged edges (docs/mission.md, "Speed")
         self.model.vis.quality.offsamples = render_samples
         self.data = mujoco.MjData(self.model)
         self.robots = [r.name for r in self.scenario.robots]
@@ -948,10 +948,10 @@ class Simulation:
         """Where the water model runs: ``"gl"`` (a shader in the renderer's context) or ``"cpu"``
         (:class:`maptidal.envs.water.WaterModel`). ``"gl"`` at construction raises RuntimeError where the
         shader cannot run. ``"auto"`` picks GL on a GPU and the CPU model on a CPU rasteriser
-        (Mesa llvmpipe), where the shader is no faster when drawing is all the process does (README,
-        rendering bench). ``"prefer-gl"`` takes the shader wherever it runs, else the CPU model: the
-        mission's choice, since with its cameras drawn beside the physics on a busy CPU the shader,
-        which spares the depth read-back and the CPU's water model, is the faster (README, mission)."""
+        (Mesa llvmpipe), where the shader is no faster when drawing is all the process does
+        (docs/simulation.md, its bench). ``"prefer-gl"`` takes the shader wherever it runs, else the CPU
+        model: the mission's choice, since with its cameras drawn beside the physics on a busy CPU the shader,
+        which spares the depth read-back and the CPU's water model, is the faster (docs/mission.md)."""
         if self._resolved_water_backend is None:
             requested = self._requested_water_backend
             height, width = self.camera.height, self.camera.width

@@ -53,7 +53,7 @@ fixes it holds its position by. Level and pitched looks are weighed together, by
 gains the level look wins. Weighing the pitched ones only once no level look was worth a trip kept the
 missions as they were until then, and added surveys at their end: on five tanks (seeds 0-9) it left as
 much of the walls uninspected (2.7 % on the mean of the four where level looks reach the walls' foot,
-against 2.8 %) and finished 40 s later (README, "Exploring the map's frontier").
+against 2.8 %) and finished 40 s later (docs/mission.md, "Exploring the map's frontier").
 
 Pure numpy and scipy, with no tank model and no simulator truth: it runs on a real robot's map as well.
 """
@@ -133,7 +133,7 @@ class FrontierParams:
     # highest corners (None: everywhere). In the loop, the box to inspect: unknown water in the box grown
     # for the views' stands (explore_box) but outside the structure's box has nothing to inspect in it;
     # counted, it sent robots looking away from the structure into the open tank, two surveys in three of
-    # session 31's default missions (README, "Exploring the map's frontier")
+    # session 31's default missions (docs/mission.md, "Exploring the map's frontier")
     gain_box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     max_views: int = 5
 

@@ -76,7 +76,7 @@ Candidates come from the keyframe mesh's faces and, with ``dense_candidates_m`` 
 default), from the keyframe's dense depth as well, one per cell of that size, each taken as a face shrunk
 to its point: a bare stretch of wall gives the keypoint mesh no face, so no candidate, however well the
 dense depth maps it. Since rule 4's lift it leaves no less of the walls uninspected than the default,
-for more than twice the tasks (README, "Closed-loop mission"), so it is off by default.
+for more than twice the tasks (docs/mission.md), so it is off by default.
 
 **A view the team has since taken is retired** (:func:`views_left_to_take`). Rule 5 judges a candidate
 against the views the robot knows when it finds it, on the map it has then. By the time a robot comes

@@ -346,10 +346,10 @@ def test_the_readme_example_of_the_batch_runs():
     import re
     from pathlib import Path
 
-    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    text = (Path(__file__).resolve().parents[1] / "docs" / "gym.md").read_text()
     (block,) = [b for b in re.findall(r"```python\n(.*?)```", text, flags=re.S) if "make_vec(" in b]
     scope: dict = {}
-    exec(compile(block, "README.md", "exec"), scope)
+    exec(compile(block, "docs/gym.md", "exec"), scope)
     assert isinstance(scope["envs"], BatchedPoseEnv) and scope["rewards"].shape == (8,)
     scope["envs"].close()
 

@@ -126,14 +126,16 @@ def test_each_pose_source_tracks_the_ground_truth(clear_recording, truth_run):
 def test_rendered_discovery_is_close_to_the_synthetic_pipeline_on_the_same_path(truth_run):
     tank = TankModel(load_tank_config(None))
     # against the synthetic keyframes without landmark refinement, the comparison the tolerance below was
-    # set on (README, "Rendered against synthetic"); the refined ones give fewer tasks (46 against 52-59)
+    # set on (docs/perception.md, "Rendered against synthetic"); the refined ones give fewer tasks
+    # (46 against 52-59)
     config = EvaluationConfig(capture="paper", refinement=RefinementParams(enabled=False))
     synthetic = discover_over_keyframes(config_keyframes(tank, config), config.discovery)
     model = CoverageModel.from_tank(tank, config.coverage)
     rendered_report, _ = model.evaluate(truth_run.tasks)
     synthetic_report, _ = model.evaluate(synthetic.tasks)
-    # the tolerances the README states: task count within 25 %; rendered keyframes see more of the walls
-    # than the synthetic ones (every textured pixel can give a keypoint), so they leave no more uninspected
+    # the tolerances docs/perception.md states: task count within 25 %; rendered keyframes see more of
+    # the walls than the synthetic ones (every textured pixel can give a keypoint), so they leave no more
+    # uninspected
     assert abs(len(truth_run.tasks) - len(synthetic.tasks)) <= 0.25 * len(synthetic.tasks)
     assert rendered_report.pct_uninspected <= synthetic_report.pct_uninspected + 5.0
 

@@ -173,7 +173,7 @@ def test_a_robot_lost_twice_on_its_way_to_a_view_gives_the_view_up(tmp_path):
 
 
 def test_by_default_a_robot_lost_on_its_way_flies_on_to_the_view(tmp_path):
-    # lost_give_up is 0 by default: never given up for being lost (README, "Without a DVL", says why)
+    # lost_give_up is 0 by default: never given up for being lost (docs/mission.md, "Without a DVL", says why)
     with mission_at_rest(tmp_path, duration_s=10.0) as (mission, params):
         assert params.lost_give_up == 0
         robot, agent, task, _ = _lose_twice_on_the_way(mission, params)
@@ -274,10 +274,10 @@ def test_a_robot_lost_on_its_way_hands_the_view_to_a_teammate_with_nothing_left_
 
 @pytest.mark.parametrize("case", ["busy", "stale", "off", "no dvl"])
 def test_a_lost_robot_keeps_its_view_when_no_teammate_is_known_to_be_free(tmp_path, case):
-    # the teammate busy, or heard idle longer ago than peer_fresh_s, or the rule off (the default: README,
-    # "Without a DVL", says why), or the idle teammate without a DVL (it may be standing down, lost
-    # itself, and would bid on nothing): it keeps the view, though lost on the way for longer than the
-    # hand-over costs
+    # the teammate busy, or heard idle longer ago than peer_fresh_s, or the rule off (the default:
+    # docs/mission.md, "Without a DVL", says why), or the idle teammate without a DVL (it may be standing
+    # down, lost itself, and would bid on nothing): it keeps the view, though lost on the way for longer
+    # than the hand-over costs
     settings = {} if case == "off" else {"lost_hand_over": True}
     with mission_at_rest(tmp_path, duration_s=10.0, **settings) as (mission, params):
         assert params.lost_hand_over == (case != "off")
@@ -462,8 +462,8 @@ def test_with_its_motion_model_30pc_off_the_robot_still_works_by_relocalising(mi
     """Coefficients 30 % off the way that misleads most: the robot without a DVL still does verified
     work, where without relocalisation it does none, ever too unsure of its position to fly to a task (it
     spends the mission going home to find a fix). It is not well localised: 17 to 40 cm off (median) in
-    this session's runs, so the bound here is only 50 cm (README, "Localisation for the whole
-    mission")."""
+    this session's runs, so the bound here is only 50 cm (docs/mission.md, "Localisation for
+    the whole mission")."""
     document, _ = missions("model-30pc-off")
     figures = document["localisation"]
     assert figures["rov1"]["median_m"] < 0.5, figures

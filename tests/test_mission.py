@@ -34,7 +34,7 @@ def short_mission(tmp_path_factory):
     scenario, _ = load_mission(None)
     out = tmp_path_factory.mktemp("mission")
     # the paper's discovery: these tests of the loop's workings need the many tasks it finds, and an
-    # unfinished mission (README, "Map-aware discovery")
+    # unfinished mission (docs/mission.md, "Map-aware discovery")
     mission = Mission(scenario, MissionParams(duration_s=55.0, seed=3, discovery_mode="paper"), out)
     # every robot's true position (its free joint's, by name) after each control period, for the
     # odometry's test

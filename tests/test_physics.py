@@ -72,7 +72,8 @@ def test_step_response_matches_solve_ivp(frame, command, axis, duration):
 # Heave up: the vertical thrusters point down, so they all run in reverse (Heavy 4, standard 2).
 T200_FORWARD_N, T200_REVERSE_N = 51.4, 39.9
 HORIZONTAL_N = (2 * T200_FORWARD_N + 2 * T200_REVERSE_N) * 0.7071
-DAMPING = {  # (linear, quadratic) per axis surge, sway, heave, typed in from README's table
+# (linear, quadratic) per axis surge, sway, heave, typed in from assets/bluerov2/README.md's table
+DAMPING = {
     "heavy": [(13.7, 141.0), (0.0, 217.0), (33.0, 190.0)],
     "standard": [(4.03, 54.72), (6.22, 65.20), (5.18, 111.34)],
 }

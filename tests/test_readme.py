@@ -1,5 +1,6 @@
-"""Every `maptidal` command the README shows runs verbatim, in order, from a fresh folder that has only
-the bundled assets beside it (as a new user's checkout has)."""
+"""Every `maptidal` command the README and the docs pages show runs verbatim, in order, from a fresh folder
+that has only the bundled assets beside it (as a new user's checkout has); the pages' links lead to
+files that exist."""
 
 import os
 import re
@@ -11,11 +12,29 @@ import pytest
 from maptidal.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
+# the README, then the docs pages in the order a reader meets them (a command may use an earlier one's output)
+PAGES = [
+    "README.md",
+    "docs/discovery.md",
+    "docs/evaluation.md",
+    "docs/perception.md",
+    "docs/simulation.md",
+    "docs/controllers.md",
+    "docs/gym.md",
+    "docs/mission.md",
+    "docs/mavlink.md",
+    "docs/allocation.md",
+]
+
+
+def documentation() -> str:
+    """The README and the docs pages, one after the other."""
+    return "\n".join((ROOT / page).read_text() for page in PAGES)
 
 
 def readme_commands() -> list[list[str]]:
-    """The `maptidal ...` lines of the README's ```sh blocks, in order, without comments."""
-    text = (ROOT / "README.md").read_text()
+    """The `maptidal ...` lines of the pages' ```sh blocks, in order, without comments."""
+    text = documentation()
     commands = []
     for block in re.findall(r"```sh\n(.*?)```", text, flags=re.S):
         for line in block.splitlines():
@@ -30,7 +49,7 @@ def test_readme_console_commands_parse():
     not run, but each `maptidal` line must parse."""
     from maptidal.cli import build_parser
 
-    text = (ROOT / "README.md").read_text()
+    text = documentation()
     lines = [
         shlex.split(line, comments=True)
         for block in re.findall(r"```console\n(.*?)```", text, flags=re.S)
@@ -61,10 +80,28 @@ def test_readme_commands_run_verbatim(tmp_path, monkeypatch, capsys):
 
 
 def test_readme_controller_example_runs_to_capture():
-    text = (ROOT / "README.md").read_text()
+    text = documentation()
     (block,) = [
         b for b in re.findall(r"```python\n(.*?)```", text, flags=re.S) if "from maptidal.controllers" in b
     ]
     scope: dict = {}
-    exec(compile(block, "README.md", "exec"), scope)
+    exec(compile(block, "docs/controllers.md", "exec"), scope)
     assert scope["status"] == "capture"
+
+
+def test_every_docs_page_is_read_and_every_link_leads_somewhere():
+    """Each page in docs/ is in PAGES (so its commands run), the README links to each, and every relative
+    link of the README and the pages (text or image) names a file that exists."""
+    import re
+
+    pages = {f"docs/{path.name}" for path in (ROOT / "docs").glob("*.md")} - {"docs/references.md"}
+    assert pages <= set(PAGES), pages - set(PAGES)
+    readme = (ROOT / "README.md").read_text()
+    for page in pages | {"docs/references.md"}:
+        assert f"]({page})" in readme, page
+    for page in [*PAGES, "docs/references.md"]:
+        text = (ROOT / page).read_text()
+        for target in re.findall(r"\]\(([^)\s]+)\)", text):
+            if "://" in target or target.startswith("#"):
+                continue
+            assert (ROOT / page).parent.joinpath(target.split("#")[0]).exists(), (page, target)

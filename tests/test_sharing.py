@@ -168,7 +168,7 @@ def failure_mission(tmp_path_factory):
     from maptidal.mission.run import Mission
 
     # the paper's discovery: the bar is about how much of what a robot found dies with it, and needs a
-    # robot that found many tasks (README, "Map-aware discovery")
+    # robot that found many tasks (docs/mission.md, "Map-aware discovery")
     scenario, params = prepare_mission(
         "assets/scenarios/failure.toml", duration_s=120.0, seed=0, discovery="paper"
     )

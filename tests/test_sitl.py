@@ -1,5 +1,5 @@
 """Real ArduSub firmware (SITL, ``--model JSON``) on our physics, where ``ARDUSUB_SITL`` names the
-``ardusub`` binary (README, "ArduSub SITL on our physics"; ``make sitl-test``). Skipped elsewhere.
+``ardusub`` binary (docs/mavlink.md, "ArduSub SITL on our physics"; ``make sitl-test``). Skipped elsewhere.
 
 One SITL serves the module. It is started with FRAME_CONFIG 2 (the Heavy), no arming checks, and
 JS_GAIN_DEFAULT = JS_GAIN_MAX = 1, so a stick of 1 is ArduSub's full RC range. Every test judges on

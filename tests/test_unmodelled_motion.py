@@ -351,7 +351,7 @@ def test_a_shoved_robot_is_told_at_its_next_frame(tmp_path, watching):
 def test_the_mission_file_turns_the_watch_on(tmp_path):
     from maptidal.mission.config import DEFAULT_MISSION, load_mission, prepare_mission
 
-    assert MissionParams().watch_pushes is False  # off by default (README, "Without a DVL")
+    assert MissionParams().watch_pushes is False  # off by default (docs/mission.md, "Without a DVL")
     mission_file = tmp_path / "mission.toml"
     text = DEFAULT_MISSION.read_text()  # the default mission has no [mission] table: add one
     mission_file.write_text(text + "\n[mission]\nwatch_pushes = true\n")

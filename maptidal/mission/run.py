@@ -170,14 +170,14 @@ class MissionParams:
     # the robot may have moved unseen, so that it counts as lost and is found again. Off by default: on
     # the default tank (seeds 0-9) it changed neither the finish nor the walls uninspected beyond the
     # seeds' noise, and the robots touched more (21 robot-seconds against 9; it over-counts in long
-    # contact: README, "Without a DVL")
+    # contact: docs/mission.md, "Without a DVL")
     watch_pushes: bool = False
     # a robot lost this many times on its way to one view gives the view up (a "gave_up" event), so
     # that a teammate that can hold its position there wins it: once may be a turn to open water on the
     # way; twice, the way to that view holds nothing the robot's map can fix on, and each time it flies
     # home and back, until the task timeout. 0, the default: never. At 2 it cut the default tank's
     # timeouts from 163 s a mission to 18 s, but on variant A the robots met more, three missions of ten
-    # with minutes of contact (README, "Without a DVL")
+    # with minutes of contact (docs/mission.md, "Without a DVL")
     lost_give_up: int = 0
     # a robot lost on its way to a view hands the view over to a teammate with a DVL (a team knows its
     # robots' sensors) that last said, within peer_fresh_s, that it had nothing left to do, once the time
@@ -188,7 +188,8 @@ class MissionParams:
     # the default tank's missions the robot with the DVL first ran out of work 13 to 183 s before the
     # end, while its teammate, lost again and again on its way to its last views, flew home and back to
     # each until it found a fix there or timed out. Off by default: within the seeds' noise on every
-    # tank, and the teammate, sent where the lost robot was bound, met it more (README, "Without a DVL")
+    # tank, and the teammate, sent where the lost robot was bound, met it more (docs/mission.md,
+    # "Without a DVL")
     lost_hand_over: bool = False
     # a robot still lost when its recovery (home, and the sweep there) is over stands down: it has tried
     # the view its map knows best and found no fix there, so its estimate is off by more than
@@ -197,7 +198,7 @@ class MissionParams:
     # than fly on an estimate that far off through the water its teammates work in; with a fix again it
     # bids again (a "stood_down" event, then "resumed"). False: it keeps its tasks and tries each until
     # the task timeout, flying home and back. In session 32's missions a robot lost for good held its
-    # tasks, and timed out on one after another, for up to 200 s (README, "Without a DVL")
+    # tasks, and timed out on one after another, for up to 200 s (docs/mission.md, "Without a DVL")
     lost_stand_down: bool = True
     # keeping clear of teammates, on where their last message said they were: two Heavy hulls (0.457 x
     # 0.575 m, Blue Robotics' technical details) touch below 0.73 m centre to centre at worst; 1 m leaves
@@ -214,7 +215,7 @@ class MissionParams:
     clear_after_s: float = 0.5
     image_size: tuple[int, int] = (320, 200)
     # the images' multisample anti-aliasing (Simulation's render_samples): 4, MuJoCo's default, stands
-    # for the lens's blur; 0 halves the render time on Mesa's CPU rasteriser (README, "Closed-loop mission")
+    # for the lens's blur; 0 halves the render time on Mesa's CPU rasteriser (docs/mission.md)
     render_samples: int = 4
     # where the water model runs (Simulation's water_backend): the shader where it can run, also on a CPU
     # rasteriser, where beside the physics it made the mission about 15 % faster than the CPU model
@@ -239,7 +240,7 @@ class MissionParams:
     # stall_move_m on its own estimate for stall_s, is pressed against something it cannot see (a thin
     # rail, a teammate) and gives the task up: go-to-pose closes the last 15 cm in a few seconds when
     # nothing is in the way, and a robot pushing on for the whole task timeout collided for up to a
-    # minute a task (README, "Exploring the map's frontier"). 0 turns it off
+    # minute a task (docs/mission.md, "Exploring the map's frontier"). 0 turns it off
     stall_s: float = 10.0
     stall_move_m: float = 0.05
     # a task is held, and judged, within these of its viewpoint and viewing direction (in full, pitch
@@ -258,7 +259,7 @@ class MissionParams:
     # 20 deg, at most one a second and one every 4 s while the view stood still (0.26 to 0.34 Hz), on the
     # reasoning that a hovering robot's keyframes add tasks only from the mesh noise; over seeds 0 to 4
     # the two did about as well (35.4 to 36.4 against 36.8 tasks done a mission, mean; 14.3 to 17.0 against
-    # 15.3 % of the walls uninspected, seeds ranging 4 to 29 %), none inspected twice (README, mission)
+    # 15.3 % of the walls uninspected, seeds ranging 4 to 29 %), none inspected twice (docs/mission.md)
     keyframes: KeyframeParams = field(
         default_factory=lambda: KeyframeParams(min_interval_s=1.0, max_interval_s=1.0)
     )
@@ -293,8 +294,8 @@ class MissionParams:
     # water, where such a robot loses its fix (lost 115 s a mission on the default tank, against 29 s in
     # the boustrophedon's missions). False leaves the frontier to the robots with a DVL: on seeds 0-9 the
     # missions ended 31 to 53 s sooner on the default tank and variants A and B, with 0.5 to 1.9 points
-    # more of the walls uninspected (README, "Exploring the map's frontier"); the surveys are what find
-    # the tasks, so it stays on
+    # more of the walls uninspected (docs/mission.md, "Exploring the map's frontier"); the surveys
+    # are what find the tasks, so it stays on
     survey_without_dvl: bool = True
     # a robot with a DVL that can pitch may pitch a look down or up by as much as it pitches for a view
     # (its max_pitch_deg, 45 deg for the Heavy), up to this: the OAK-D's vertical field of view, so that
@@ -309,13 +310,13 @@ class MissionParams:
     # how far a survey sweeps its camera either side of its look's heading: a robot with a DVL as far as
     # its first sweep (explore_yaw_deg), so that a look's side views map what the look's own view only
     # grazed; a robot without one not at all (0: it takes the look's own view, and plans its next look on
-    # the map that view updated). Its visual odometry fails on most frames while it turns (README,
+    # the map that view updated). Its visual odometry fails on most frames while it turns (docs/mission.md,
     # "Without a DVL"), and a sweep at each look was 20 s of such turning. With sweep_rate_dvl_deg_s,
     # against both robots sweeping 60 deg at 12 deg/s (seeds 0-9, paired): finish -30, -2, -68 and -12 s
     # on the default tank and variants A, B and C, -37 s on D (held out), the walls uninspected within
     # the seeds' noise on each. Neither robot sweeping was quicker still, but on variant C (1.6 m deep),
     # where a single pitched look's sweep found the foot of the end wall, it left 11 % of the walls
-    # uninspected against 4.6 % (README, "Exploring the map's frontier")
+    # uninspected against 4.6 % (docs/mission.md, "Exploring the map's frontier")
     survey_sweep_deg: float = 60.0
     survey_sweep_no_dvl_deg: float = 0.0
     # how fast a robot with a DVL turns through a survey's sweep (one without turns at yaw_rate_deg_s,
@@ -332,7 +333,7 @@ class MissionParams:
     # views known and the map held when it was found. Off by default: on the map, with no occlusion, the
     # views taken claim more than their images show. With it on (and the box to inspect) 1 to 2 tasks a
     # mission were retired, and their planned views, scored offline with those taken, leave 3.0 % of
-    # variant A's walls uninspected instead of 4.5 % (seeds 0-9; README, "Retiring a task")
+    # variant A's walls uninspected instead of 4.5 % (seeds 0-9; docs/mission.md, "Retiring a task")
     retire_taken: bool = False
     # the region a map-aware team is sent to inspect, beyond the exploration radius about each launch:
     # "walls", the box the tank's evaluated walls lie in (the job as the coverage evaluation scores it,

@@ -52,7 +52,7 @@ class OdometryParams:
     # speed (Blue Robotics' product page), at 5 frames/s
     max_step_m: float = 0.3
     # horizontal, with a DVL: the inverse-variance weight of a visual step (about 2 cm off over a 1 s
-    # frame, the good steps of the robot without a DVL: README, "Closed-loop mission") against the DVL's
+    # frame, the good steps of the robot without a DVL: docs/mission.md) against the DVL's
     # (about 1 mm, drift_m2_s_dvl over 1 s): 0.25 %. Until session 15 it was 0.8, and the DVL robot meshed
     # on a pose 58 cm off (median, 600 s of the default mission) where its DVL alone was 3 cm off
     visual_weight: float = 0.0025
@@ -60,8 +60,8 @@ class OdometryParams:
     has_dvl: bool = True
     model_aided: bool = True
     # without a DVL, model-aided: in the default mission the model-aided step is off by 2 cm (median) and
-    # 12 cm (90th percentile) over a 1 s frame and the good visual steps by about as much (README,
-    # "Closed-loop mission"), so the two weigh alike
+    # 12 cm (90th percentile) over a 1 s frame and the good visual steps by about as much
+    # (docs/mission.md), so the two weigh alike
     visual_weight_model_aided: float = 0.5
     # the gate, per frame: the model-aided step's error over a 1 s frame comes from the unmodelled thrust
     # lag and the model's error, about 20 % of a 0.25 m/s speed (5 cm); the gate is some 2.5 times that
