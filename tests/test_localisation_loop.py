@@ -5,6 +5,7 @@ lose the robot. Judged on the simulator's truth, which the robots never see."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -482,3 +483,20 @@ def test_the_report_plots_and_tabulates_the_localisation(missions):
     assert "## Localisation" in report and "![localisation](localisation.png)" in report
     worst = max(f["max_m"] for f in document["localisation"].values())
     assert worst == pytest.approx(np.hypot(rows[:, 0] - rows[:, 2], rows[:, 1] - rows[:, 3]).max(), abs=1e-4)
+
+
+def test_with_the_pose_from_the_truth_every_robot_flies_on_the_truth(tmp_path):
+    """``pose_source = "truth"`` is an oracle localisation: each frame sets what a robot flies on to its
+    true pose, so the robot without a DVL, its motion model 30 % off, stays within a frame's dead
+    reckoning of the truth (before, it meshed on the truth but flew on its dead reckoning alone) and
+    its views are verified."""
+    scenario, _ = load_mission(None)
+    params = MissionParams(
+        duration_s=60.0, seed=1, pose_source="truth", motion_model_error=0.3, perception_process=False
+    )
+    document = Mission(scenario, dataclasses.replace(params, plots=False), tmp_path).run()
+    figures = document["localisation"]
+    assert figures["rov1"]["median_m"] < 0.03, figures
+    assert figures["rov1"]["max_m"] < 0.1, figures
+    done = document["done_by_robot"]["rov1"]
+    assert done["claimed"] >= 1 and done["verified"] == done["claimed"], done

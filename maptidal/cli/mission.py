@@ -17,6 +17,13 @@ from maptidal.cli.common import (
     positive_int,
 )
 
+POSE_HELP = (
+    "where each robot's pose comes from, to mesh on and to fly on: vo (the default), its visual odometry "
+    "and relocalisation against its own map, weighed against its DVL or motion model; dr, its dead "
+    "reckoning alone (a robot without a DVL flies blind); truth, the simulator's true pose, a frame at a "
+    "time (an oracle localisation, to see what localisation costs)"
+)
+
 
 def register(commands) -> None:
     """Add the ``run``, ``report`` and ``batch`` subcommands."""
@@ -47,9 +54,7 @@ def register(commands) -> None:
         "scenario's, else 600)",
     )
     run.add_argument("--seed", type=int, default=0, help="seed of the sensor and camera noise (default 0)")
-    run.add_argument(
-        "--pose", choices=("truth", "dr", "vo"), help="pose source of the front end (default vo)"
-    )
+    run.add_argument("--pose", choices=("truth", "dr", "vo"), help=POSE_HELP)
     run.add_argument(
         "--planner",
         choices=("maptidal", "voronoi", "boustrophedon"),
@@ -129,9 +134,7 @@ def register(commands) -> None:
     batch.add_argument(
         "--duration", type=positive_float, metavar="S", help="simulated seconds of each mission"
     )
-    batch.add_argument(
-        "--pose", choices=("truth", "dr", "vo"), help="pose source of the front end (default vo)"
-    )
+    batch.add_argument("--pose", choices=("truth", "dr", "vo"), help=POSE_HELP)
     batch.add_argument(
         "--planners",
         metavar="LIST",

@@ -2,7 +2,7 @@
 
     [mission]
     duration_s = 180
-    pose_source = "vo"     # what the front end meshes on: truth, dr or vo
+    pose_source = "vo"     # what each robot meshes and flies on: vo, dr or truth (an oracle)
     frame_rate_hz = 1.0    # stereo frames per robot per second
     frame_rate_no_dvl_hz = 1.0  # ... of a robot without a DVL
     motion_model_error = 0.0    # how far off the estimators' motion models are (0: exact, 0.3: 30 %)

@@ -81,10 +81,11 @@ class ExploreRequest:
 @dataclass(frozen=True)
 class FrameResult:
     """What a frame gave: the horizontal offset ``xy_correction`` of the visual pose from the dead
-    reckoning and that pose's horizontal standard deviation ``position_sigma_m`` (both None unless the
-    pose source is ``vo``), the front end's count of visual fixes so far, the
-    keyframe mesh's face count (0 when the frame made no keyframe, or an empty mesh), the new tasks ``(M,
-    6)`` discovery found on it, and the seconds spent in the front end and in discovery."""
+    reckoning and that pose's horizontal standard deviation ``position_sigma_m`` (both None when the
+    pose source is ``dr``; with ``truth`` the offset to the true pose, and 0), the front end's count of
+    visual fixes so far, the keyframe mesh's face count (0 when the frame made no keyframe, or an empty
+    mesh), the new tasks ``(M, 6)`` discovery found on it, and the seconds spent in the front end and in
+    discovery."""
 
     robot: str
     time_s: float
@@ -127,6 +128,9 @@ def perceive(
     if front.pose_source == "vo":
         correction = (record.pose.position - job.dead_reckoned.position)[:2]
         sigma = front.odometry.sigma_m
+    elif front.pose_source == "truth":
+        # an oracle localisation: the robot flies on the true pose it meshes on, a frame at a time
+        correction, sigma = (record.pose.position - job.dead_reckoned.position)[:2], 0.0
     perception_s = time.perf_counter() - start
     faces, new, rules, retired = 0, np.zeros((0, 6)), None, np.zeros(0, np.int64)
     if keyframe is not None and len(keyframe.keyframe.mesh.faces):

@@ -1122,8 +1122,9 @@ class Mission:
     def _estimate(self, robot: _Robot):
         """What the robot flies on: its dead reckoning, with the horizontal position corrected by its front
         end (visual odometry and relocalisation, weighed against the DVL or the motion model) when the pose
-        source is ``vo``: the pose it meshes on. The offset is refreshed at every frame; between frames the
-        dead reckoning carries it. Without it a robot with no DVL flies blind."""
+        source is ``vo``, or set to the truth when it is ``truth`` (an oracle localisation): the pose it
+        meshes on. The offset is refreshed at every frame; between frames the dead reckoning carries it.
+        With ``dr``, and without a DVL, the robot flies blind."""
         estimate = self.sim.estimate(robot.name)
         if not robot.xy_correction.any():
             return estimate
