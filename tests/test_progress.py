@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import io
 
+import pytest
+
 from maptidal.progress import ProgressBar, line_open
 
 
@@ -42,3 +44,28 @@ def test_a_disabled_bar_writes_nothing_and_still_counts():
     bar = ProgressBar(4, "work", stream=log, enabled=False)
     bar.advance(3)
     assert log.getvalue() == "" and bar.done == 3
+
+
+@pytest.mark.parametrize("finished", [True, False])
+def test_a_mission_that_ends_before_its_cap_fills_its_bar(monkeypatch, tmp_path, capsys, finished):
+    """`maptidal run`'s bar counts the simulated time against the cap: a mission whose work is done at
+    180 of 600 s shows a full bar saying so, not one stuck at 30 %."""
+    import maptidal.mission.outputs
+    import maptidal.mission.run
+    from maptidal.cli import main
+
+    class Flown:
+        def __init__(self, scenario, params, out):
+            self.writer = type("Writer", (), {"cleared": 0})()
+
+        def run(self, progress):
+            for now in (60.0, 120.0, 180.0):
+                progress(now, 5, 5, 600.0, 90.0)
+            return {"finished": finished, "sim_time_s": 180.0}
+
+    monkeypatch.setattr(maptidal.mission.run, "Mission", Flown)
+    monkeypatch.setattr(maptidal.mission.outputs, "summary_table", lambda document: "")
+    assert main(["run", "--no-plots", "--out", str(tmp_path / "m")]) == 0
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    ended = "finished" if finished else "ended"
+    assert "100/100" in last and f"{ended} at 180 s, before the cap" in last, last

@@ -224,6 +224,9 @@ def run_mission(args: argparse.Namespace) -> int:
             state["shown"] = percent
 
     document = mission.run(progress)
+    if state["shown"] < 100:  # it ended before its cap (its work done, as a rule): the bar is full
+        ended = "finished" if document["finished"] else "ended"
+        bar.advance(100 - state["shown"], f"{ended} at {document['sim_time_s']:.0f} s, before the cap")
     print(summary_table(document))
     print(f"report: {Path(args.out) / 'report.md'}")
     return 0
