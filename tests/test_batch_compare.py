@@ -177,3 +177,27 @@ def test_each_planner_is_set_against_map_tidal_seed_by_seed_in_one_batch():
     # without Map-TIDAL, each planner against the first
     others = "\n".join(planners_pairs_markdown([row for row in rows if row["planner"] != "maptidal"]))
     assert "against boustrophedon" in others and "### voronoi" in others and "### boustrophedon" not in others
+
+
+def test_the_random_tanks_bench_pairs_each_tanks_missions_by_seed(tmp_path):
+    """tests/bench/random_tanks.py --against: two tanks of two seeds each are four pairs (a seed of one
+    tank is not the same seed's mission of another), and the difference is the missions' mean."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent / "bench"))
+    import random_tanks
+
+    finish = {"before": {(0, 0): 300.0, (0, 1): 310.0, (1, 0): 200.0, (1, 1): 220.0}}
+    finish["after"] = {
+        key: value + step for (key, value), step in zip(finish["before"].items(), (1, 2, 3, 6), strict=True)
+    }
+    for run, values in finish.items():
+        for tank in (0, 1):
+            folder = tmp_path / run / f"random_{tank:02d}" / "batch"
+            folder.mkdir(parents=True)
+            rows = [_row(seed, completion_time_s=values[(tank, seed)]) for seed in (0, 1)]
+            (folder / "batch.csv").write_text(batch_csv(rows))
+    text = random_tanks.paired_against(tmp_path / "after", tmp_path / "before", 2)
+    (line,) = [line for line in text.splitlines() if line.startswith("| finish time")]
+    assert "| 3 [" in line and "0 / 4 of 4" in line, line  # mean of 1, 2, 3 and 6; higher on all four

@@ -7,6 +7,11 @@ mission launches them. Every tank gets a folder with its tank.toml and mission.t
 given planners and seeds; the summary prints per tank and lands in summary.md.
 
     python tests/bench/random_tanks.py --tanks 6 --draw-seed 1 --seeds 0-1 --out runs/random_tanks
+
+A change is judged on tanks it was not made on: fly the same draw before and after it (another checkout,
+another --out), then ``--against BEFORE`` pairs every tank's missions seed by seed with BEFORE's and
+writes against.md, as ``maptidal compare-batches`` does for one tank (each tank's seed counts as a
+pair of its own).
 """
 
 from __future__ import annotations
@@ -118,6 +123,9 @@ def main() -> int:
     parser.add_argument("--planners", default="maptidal,boustrophedon", help="as maptidal batch takes them")
     parser.add_argument("--jobs", type=int, default=2, help="missions at once (default 2)")
     parser.add_argument("--out", type=Path, default=Path("runs/random_tanks"), help="output folder")
+    parser.add_argument(
+        "--against", type=Path, help="an earlier run's --out, of the same draw: pair every mission with it"
+    )
     args = parser.parse_args()
     from maptidal.tank import tank_toml
 
@@ -156,7 +164,25 @@ def main() -> int:
     lines.append(_row("mean", None, "", [overall[p] for p in planners]))
     print(lines[-1])
     (args.out / "summary.md").write_text("\n".join(lines) + "\n")
+    if args.against is not None:
+        text = paired_against(args.out, args.against, args.tanks)
+        (args.out / "against.md").write_text(text)
+        print(text)
     return 0
+
+
+def paired_against(after: Path, before: Path, tanks: int) -> str:
+    """Every metric of every planner, paired mission by mission between two runs of the same draw
+    (``maptidal compare-batches``'s table): a tank's seed is one pair."""
+    from maptidal.mission.batch_compare import compare_batches, comparison_markdown, read_batch
+
+    rows: dict[Path, list[dict]] = {after: [], before: []}
+    for index in range(tanks):
+        for run, collected in rows.items():
+            for row in read_batch(run / f"random_{index:02d}" / "batch"):
+                collected.append({**row, "seed": index * 1000 + row["seed"]})  # unique across tanks
+    differences = compare_batches(rows[before], rows[after])
+    return comparison_markdown(differences, str(before), str(after))
 
 
 if __name__ == "__main__":
