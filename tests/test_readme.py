@@ -90,8 +90,9 @@ def test_readme_controller_example_runs_to_capture():
 
 
 def test_every_docs_page_is_read_and_every_link_leads_somewhere():
-    """Each page in docs/ is in PAGES (so its commands run), the README links to each, and every relative
-    link of the README and the pages (text or image) names a file that exists."""
+    """Each page in docs/ is in PAGES (so its commands run), the README links to each, every relative
+    link of the README and the pages (text or image) names a file that exists, and every link within a
+    page names one of its headings."""
     import re
 
     pages = {f"docs/{path.name}" for path in (ROOT / "docs").glob("*.md")} - {"docs/references.md"}
@@ -101,7 +102,15 @@ def test_every_docs_page_is_read_and_every_link_leads_somewhere():
         assert f"]({page})" in readme, page
     for page in [*PAGES, "docs/references.md"]:
         text = (ROOT / page).read_text()
+        # a heading's anchor as GitHub makes it: lower case, punctuation dropped, spaces to hyphens
+        anchors = {
+            re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+            for heading in re.findall(r"^#+ (.+)$", text, flags=re.M)
+        }
         for target in re.findall(r"\]\(([^)\s]+)\)", text):
-            if "://" in target or target.startswith("#"):
+            if "://" in target:
+                continue
+            if target.startswith("#"):
+                assert target[1:] in anchors, (page, target)
                 continue
             assert (ROOT / page).parent.joinpath(target.split("#")[0]).exists(), (page, target)
