@@ -206,8 +206,16 @@ def test_a_robot_that_can_pitch_asks_for_pitched_looks_and_holds_the_pitch_throu
         without = mission.robots["rov1"]
         assert not without.has_dvl and without.max_pitch_deg == 45.0
         assert mission._look_params(without).pitches_deg == (0.0,)
-        request = mission._explore_request(dataclasses.replace(robot, activity="idle", explored=False))
+        request = mission._explore_request(dataclasses.replace(robot, activity="idle", explored=False), 5.0)
         assert request is not None and request.params.pitches_deg == (0.0, 45.0, -45.0)
+        # its looks leave a teammate's vicinity to it, unless the teammate said it had nothing left to do
+        agent = mission.auction.agents[robot.index]
+        agent.peer_positions[without.index] = (np.array([-1.0, -0.5, 1.0]), 3.0)
+        asking = dataclasses.replace(robot, activity="idle", explored=False)
+        np.testing.assert_allclose(mission._explore_request(asking, 5.0).teammates, [[-1.0, -0.5, 1.0, 2.0]])
+        agent.peer_idle[without.index] = True
+        assert len(mission._explore_request(asking, 5.0).teammates) == 0
+        agent.peer_idle[without.index] = False
         # a look 40 deg nose down: the robot pitches on its way there and holds it through the sweep
         robot.activity, robot.survey_ended_s = "idle", 10.0
         pitch = math.radians(40.0)

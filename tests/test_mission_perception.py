@@ -161,7 +161,7 @@ def test_a_robot_with_no_look_left_gets_views_of_its_maps_gaps_unless_a_teammate
     everything = FrontierParams()
     blank = np.zeros((HEIGHT, WIDTH, 3), np.uint8)
 
-    def answer(params: FrontierParams, teammates=None):
+    def answer(params: FrontierParams, teammates=None, holding=None):
         robot_map = RobotMap(MapAwareParams())
         robot_map.add_surface(camera, wall)
         job = FrameJob(
@@ -173,7 +173,7 @@ def test_a_robot_with_no_look_left_gets_views_of_its_maps_gaps_unless_a_teammate
             CameraPose(camera, rotation),
             np.zeros((0, 6)),
             teammates,
-            ExploreRequest(params, camera.copy(), np.zeros((0, 3))),
+            ExploreRequest(params, camera.copy(), np.zeros((0, 3)), holding),
         )
         front = FrontEnd(INTRINSICS, "truth", FrontEndParams())
         return perceive(front, job, DiscoveryParams(), robot_map)
@@ -188,6 +188,9 @@ def test_a_robot_with_no_look_left_gets_views_of_its_maps_gaps_unless_a_teammate
     teammates = np.column_stack([grid.reshape(-1, 3), np.zeros(grid.size // 3)])
     held = answer(everything, teammates)
     assert len(held.frontier) == 0 and held.held_for_teammates > 0 and len(held.gap_tasks) == 0
+    # the same teammates, none of them holding looks (each said it had nothing left to do): looks again
+    free = answer(everything, teammates, holding=np.zeros((0, 4)))
+    assert len(free.frontier) > 0 and free.held_for_teammates == 0
     robot_map = RobotMap(MapAwareParams())
     robot_map.add_surface(camera, wall)
     assert len(gap_views(robot_map, camera, np.zeros((0, 6)), DiscoveryParams(), teammates).final) >= 1

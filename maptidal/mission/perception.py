@@ -70,12 +70,14 @@ class FrameJob:
 @dataclass(frozen=True)
 class ExploreRequest:
     """What the next-look search (:func:`maptidal.exploration.explore_views`) needs beyond the map: its
-    settings, the robot's launch point (the centre of the region to explore) and the places it surveyed
-    already ``(M, 3)``."""
+    settings, the robot's launch point (the centre of the region to explore), the places it surveyed
+    already ``(M, 3)``, and the teammates whose vicinity its looks leave to them, rows ``(x, y, z, ...)``
+    (None: every teammate of the job's ``teammates``)."""
 
     params: FrontierParams
     launch: np.ndarray
     visited: np.ndarray
+    teammates: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -184,11 +186,10 @@ def perceive(
     if job.explore is not None and robot_map is not None:
         start = time.perf_counter()
         request = job.explore
-        search = explore(
-            robot_map, job.pose.position, request.params, request.launch, job.teammates, request.visited
-        )
+        near = job.teammates if request.teammates is None else request.teammates
+        search = explore(robot_map, job.pose.position, request.params, request.launch, near, request.visited)
         frontier, exploration = search.views, search.summary()
-        if len(frontier) == 0 and job.teammates is not None and len(job.teammates):
+        if len(frontier) == 0 and near is not None and len(near):
             # none left but near a teammate: the robot waits for it to move on, it has not explored
             alone = explore_views(
                 robot_map, job.pose.position, request.params, request.launch, None, request.visited

@@ -1360,7 +1360,7 @@ class Mission:
             self._camera_pose(robot, "dr"),
             existing,
             self._teammates_heard(robot, now),
-            self._explore_request(robot),
+            self._explore_request(robot, now),
             dvl_out_s=robot.dvl_out_s,
             unmodelled_m=robot.unmodelled.take(),
             **review,
@@ -1368,13 +1368,22 @@ class Mission:
         robot.dvl_out_s = 0.0
         self._frames[robot.name] = self._gl.submit(self._draw_frame, snapshot, job)
 
-    def _explore_request(self, robot: _Robot) -> ExploreRequest | None:
+    def _explore_request(self, robot: _Robot, now: float) -> ExploreRequest | None:
         """The robot's ask for its next looks: only when exploring is on and left to do, and the robot
-        is idle (it has no task to fly)."""
+        is idle (it has no task to fly). Its looks leave a teammate's vicinity to it, but not a teammate
+        whose last message said it had nothing left to do: that one will not move on, and gives way to
+        a robot that comes to it (``_keep_clear``), so waiting for it would wait for nothing."""
         if not self.params.exploring or robot.explored or robot.activity != "idle":
             return None
         visited = np.array(robot.surveyed, float).reshape(-1, 3)
-        return ExploreRequest(self._look_params(robot), robot.home_position.copy(), visited)
+        agent = self.auction.agents[robot.index]
+        busy = [
+            [*np.asarray(position, float)[:3], now - heard_s]
+            for peer, (position, heard_s) in agent.peer_positions.items()
+            if not agent.peer_idle.get(peer, False)
+        ]
+        teammates = np.array(busy, float).reshape(-1, 4)
+        return ExploreRequest(self._look_params(robot), robot.home_position.copy(), visited, teammates)
 
     def _look_params(self, robot: _Robot) -> FrontierParams:
         """The exploration's settings for ``robot``: level looks, and, for a robot with a DVL, looks
