@@ -986,10 +986,15 @@ class Mission:
             kind = occupation(robot.activity, robot.lost, robot.giving_way, robot.explored)
             robot.time_use.add(now, elapsed_s, kind)
 
-    def _teammates_heard(self, robot: _Robot, now: float) -> np.ndarray:
-        """Rows ``(x, y, z, age_s)``: where each teammate's last message put it, and how long ago."""
-        heard = self.auction.agents[robot.index].peer_positions.values()
-        rows = [[*np.asarray(position, float)[:3], now - heard_s] for position, heard_s in heard]
+    def _teammates_heard(self, robot: _Robot, now: float, busy_only: bool = False) -> np.ndarray:
+        """Rows ``(x, y, z, age_s)``: where each teammate's last message put it, and how long ago; with
+        ``busy_only``, only the teammates whose last message did not say they had nothing left to do."""
+        agent = self.auction.agents[robot.index]
+        rows = [
+            [*np.asarray(position, float)[:3], now - heard_s]
+            for peer, (position, heard_s) in agent.peer_positions.items()
+            if not (busy_only and agent.peer_idle.get(peer, False))
+        ]
         return np.array(rows, float).reshape(-1, 4)
 
     def _keep_clear(self, robot: _Robot, reference: PoseReference, now: float) -> PoseReference:
@@ -1376,14 +1381,8 @@ class Mission:
         if not self.params.exploring or robot.explored or robot.activity != "idle":
             return None
         visited = np.array(robot.surveyed, float).reshape(-1, 3)
-        agent = self.auction.agents[robot.index]
-        busy = [
-            [*np.asarray(position, float)[:3], now - heard_s]
-            for peer, (position, heard_s) in agent.peer_positions.items()
-            if not agent.peer_idle.get(peer, False)
-        ]
-        teammates = np.array(busy, float).reshape(-1, 4)
-        return ExploreRequest(self._look_params(robot), robot.home_position.copy(), visited, teammates)
+        busy = self._teammates_heard(robot, now, busy_only=True)
+        return ExploreRequest(self._look_params(robot), robot.home_position.copy(), visited, busy)
 
     def _look_params(self, robot: _Robot) -> FrontierParams:
         """The exploration's settings for ``robot``: level looks, and, for a robot with a DVL, looks
