@@ -89,6 +89,18 @@ not rule 5's share, since a view at the top of a wall adds only a strip (rule 5'
 share would take for a repeat. The mission does this only when asked (``retire_taken``, off by default):
 on the map, where occlusion is not counted, the views taken claim more than their images show.
 
+**A repeat of a task found first is retired** (:func:`views_repeated`). Two robots that map the same
+stretch of wall before either hears of the other's tasks each find a view of it, and both would be flown:
+rule 5 could not count a view the robot did not know. Once a robot knows both, a view is a repeat when a
+view a teammate found, of lower key, holds its face and all but under ``min_new_fraction`` of its cells
+on the robot's map now (or all but under ``min_new_points``): rule 5's test, against that one view. It
+is retired (as above) when the robot comes to it. Keys are ordered (the finder's index, then its own
+count), so of two views that repeat each other only the higher is ever dropped, by whichever robot judges
+it, and no robot needs to know when a teammate found a task. Views one robot found are not judged
+against each other: rule 5 judged each against the robot's own earlier ones when it was found. The
+mission does this only when asked (``retire_repeats``, off by default): in the loop the views it retired
+held a part of the walls their images would have shown.
+
 Every number is a parameter of :class:`MapAwareParams`; the defaults are chosen by the reasoning given
 beside them, not fitted to a tank. Pure numpy and scipy: it runs on a real robot's landmarks as well.
 """
@@ -1052,3 +1064,57 @@ def views_left_to_take(
     covered = _covered(taken, cells, discovery.camera)
     left = np.array([int((sees & ~covered).sum()) for sees in frustum_masks(rows, cells, discovery.camera)])
     return left >= params.min_new_points
+
+
+def views_repeated(
+    robot_map: RobotMap,
+    rows: np.ndarray,
+    row_keys: np.ndarray,
+    known: np.ndarray,
+    known_keys: np.ndarray,
+    discovery: DiscoveryParams | None = None,
+) -> np.ndarray:
+    """Which of the views ``rows`` ``(N, 6)``, keyed ``row_keys``, repeat one of the views ``known``
+    ``(K, 6)`` that a teammate found and that has a lower key (``known_keys``; a key's finder is
+    :func:`maptidal.allocation.tasks.task_key`'s origin, its bits above the 16th): that view holds the
+    view's own face (where it looks at from the standoff) and all but under ``min_new_fraction`` of its
+    cells on the robot's map now, or all but under ``min_new_points`` of them. Rule 5 would have dropped
+    it for that one view, had its finder known it (module docstring, "A repeat of a task found first is
+    retired"). Only the lower key stands for the other, so of two views that repeat each other only one
+    is ever dropped, whichever robot judges them. A view that holds under ``min_new_points`` cells of the
+    map now is not judged: nothing on the map says it is a repeat."""
+    params = robot_map.params
+    discovery = discovery or DiscoveryParams()
+    rows = validate_viewpoints(rows, "views to review").reshape(-1, 6)
+    known = validate_viewpoints(known, "known views").reshape(-1, 6)
+    row_keys = np.asarray(row_keys, np.int64).reshape(-1)
+    known_keys = np.asarray(known_keys, np.int64).reshape(-1)
+    if len(row_keys) != len(rows) or len(known_keys) != len(known):
+        raise ValueError("views_repeated: one key per view")
+    repeated = np.zeros(len(rows), bool)
+    points = robot_map.points()
+    if len(rows) == 0 or len(known) == 0 or len(points) == 0:
+        return repeated
+    cells = coverage_cells(points, params)
+    if len(cells) == 0:
+        return repeated
+    camera = discovery.camera
+    # which known view may stand for which view: found by another robot, with a lower key
+    finder, row_finder = known_keys >> 16, row_keys >> 16
+    stands_for = (known_keys[:, None] < row_keys[None, :]) & (finder[:, None] != row_finder[None, :])
+    if not stands_for.any():
+        return repeated
+    faces = rows[:, :3] + discovery.standoff * rows[:, 3:]
+    face_in_known = np.stack(list(frustum_masks(known, faces, camera)))  # (K, N)
+    stands_for &= face_in_known
+    if not stands_for.any():
+        return repeated
+    known_sees = np.stack(list(frustum_masks(known, cells, camera)))  # (K, cells)
+    for i, row_sees in enumerate(frustum_masks(rows, cells, camera)):
+        footprint = int(row_sees.sum())
+        if footprint < params.min_new_points or not stands_for[:, i].any():
+            continue
+        new = (row_sees[None, :] & ~known_sees[stands_for[:, i]]).sum(axis=1)
+        little = (new < params.min_new_points) | (new < params.min_new_fraction * footprint)
+        repeated[i] = bool(little.any())
+    return repeated

@@ -480,10 +480,65 @@ def test_perception_reviews_the_path_against_the_views_taken_on_its_map():
         existing_done=np.array([True, False, False, False]),
         to_review=np.array([False, True, True, False]),
     )
-    assert _review(robot_map, job, DiscoveryParams()).tolist() == [11]
+    discovery = DiscoveryParams()
+
+    def keys(found):
+        return [found[0].tolist(), found[1].tolist()]
+
+    assert keys(_review(robot_map, job, discovery)) == [[11], []]
     nothing_done = dataclasses.replace(job, existing_done=np.zeros(4, bool))
-    assert _review(robot_map, nothing_done, DiscoveryParams()).tolist() == []
-    assert _review(robot_map, dataclasses.replace(job, to_review=None), DiscoveryParams()).tolist() == []
+    assert keys(_review(robot_map, nothing_done, discovery)) == [[], []]
+    assert keys(_review(robot_map, dataclasses.replace(job, to_review=None), discovery)) == [[], []]
+    # the views taken not asked for: nothing is retired for them
+    assert keys(_review(robot_map, dataclasses.replace(job, review_taken=False), discovery)) == [[], []]
+    # repeats: nothing done; a teammate's task of lower key (robot 0's, key 2) holds the first task on
+    # the path (robot 1's); the second, 1.6 m along, is a view of its own; a task not a stand-in counts not
+    teammates = dataclasses.replace(
+        nothing_done,
+        existing_keys=np.array([2, 1 << 16 | 0, 1 << 16 | 1, 1 << 16 | 2]),
+        stand_ins=np.ones(4, bool),
+    )
+    assert keys(_review(robot_map, teammates, discovery)) == [[], [1 << 16 | 0]]
+    gave_up = dataclasses.replace(teammates, stand_ins=np.array([False, True, True, True]))
+    assert keys(_review(robot_map, gave_up, discovery)) == [[], []]
+    # one robot's own views are not judged against each other; nor the lower key against the higher
+    own = dataclasses.replace(teammates, existing_keys=np.array([2, 3, 4, 5]))
+    assert keys(_review(robot_map, own, discovery)) == [[], []]
+    higher = dataclasses.replace(teammates, existing_keys=np.array([1 << 16 | 9, 0, 1, 2]))
+    assert keys(_review(robot_map, higher, discovery)) == [[], []]
+    # a task the views taken retire is not judged a repeat as well
+    both = dataclasses.replace(teammates, existing_done=job.existing_done)
+    assert keys(_review(robot_map, both, discovery)) == [[1 << 16 | 0], []]
+
+
+@pytest.mark.parametrize(("taken", "repeats"), [(False, False), (True, False), (False, True), (True, True)])
+def test_a_frame_asks_for_the_reviews_the_mission_settings_ask_for(tmp_path, taken, repeats):
+    """The job a frame sends to perception reviews the open tasks on the robot's path only when
+    ``retire_taken`` or ``retire_repeats`` is on; the views taken count only with ``retire_taken``, and
+    every task but those the robot gave up may stand in for a repeat only with ``retire_repeats``."""
+    with mission_at_rest(tmp_path, retire_taken=taken, retire_repeats=repeats) as (mission, _):
+        robot = mission.robots["rov0"]
+        agent = mission.auction.agents[robot.index]
+        kept = agent.discover_task([-1.0, 0.2, 1.0], [1.0, 0.0, 0.0], now_s=0.0)
+        dropped = agent.discover_task([-1.0, -0.6, 1.0], [1.0, 0.0, 0.0], now_s=0.0)
+        agent.build_bundle(0.0)
+        robot.skipped.add(dropped.key)
+        jobs = []
+        mission._draw_frame = lambda snapshot, job: jobs.append(job) or np.zeros((2, 2, 3), np.uint8)
+        mission._see(robot, 1.0)
+        mission._frames.pop(robot.name).result()
+        (job,) = jobs
+        if not (taken or repeats):
+            assert job.to_review is None and job.stand_ins is None
+            return
+        order = [int(k) for k in job.existing_keys]
+        assert sorted(order) == sorted([kept.key, dropped.key])
+        assert job.to_review.tolist() == [key == kept.key for key in order]
+        assert job.review_taken is taken
+        if repeats:
+            assert job.stand_ins.tolist() == [key != dropped.key for key in order]
+        else:
+            assert job.stand_ins is None
 
 
 def test_a_task_counts_for_the_survey_whose_frame_found_it(tmp_path):

@@ -26,6 +26,7 @@ from maptidal.map_discovery import (
     reachable_on_map,
     refit_on_faces,
     views_left_to_take,
+    views_repeated,
     water_surface,
 )
 
@@ -593,6 +594,87 @@ def test_a_view_the_views_taken_cover_is_retired_and_one_they_miss_kept():
     assert views_left_to_take(robot_map, top, level, discovery).tolist() == [True]
     below = (_sees(level[0], cells, discovery) & ~_sees(top[0], cells, discovery)).sum()
     assert views_left_to_take(robot_map, level, top, discovery).tolist() == [below >= params.min_new_points]
+
+
+def _repeated_by_hand(rows, row_keys, known, known_keys, cells, params, discovery):
+    """views_repeated written out: a view is a repeat when one known view of lower key, from another
+    finder (key >> 16), holds its face and all but under min_new_fraction (or min_new_points) of its
+    cells; a view of under min_new_points cells is never one."""
+    out = []
+    for row, key in zip(rows, row_keys, strict=True):
+        sees = _sees(row, cells, discovery)
+        face = row[:3] + discovery.standoff * row[3:]
+        verdict = False
+        if sees.sum() >= params.min_new_points:
+            for other, other_key in zip(known, known_keys, strict=True):
+                if other_key >= key or other_key >> 16 == key >> 16:
+                    continue
+                if not _sees(other, face[None], discovery)[0]:
+                    continue
+                new = int((sees & ~_sees(other, cells, discovery)).sum())
+                if new < params.min_new_points or new < params.min_new_fraction * sees.sum():
+                    verdict = True
+        out.append(verdict)
+    return out
+
+
+def test_a_teammates_view_of_the_same_wall_retires_the_one_of_higher_key():
+    """views_repeated: of two robots' views of one stretch of wall only the higher key is a repeat; a
+    view the same robot found, or one of another stretch, is not; against brute force on random views."""
+    rng = np.random.default_rng(12)
+    points, ids, camera = _wall_scene(rng)
+    params = MapAwareParams()
+    robot_map = _map_of(points, ids, camera, params)
+    discovery = DiscoveryParams()
+
+    def cells_of(mapped):  # rule 5's cells, the 0.1 m voxels that hold landmarks
+        return (np.unique(np.floor(mapped / 0.1), axis=0) + 0.5) * 0.1
+
+    first = np.array([[2.0, 1.0, 1.0, 1.0, 0.0, 0.0]])  # robot 0's fourth task
+    again = np.array([[2.0, 1.08, 1.02, 1.0, 0.0, 0.0]])  # robot 1's first, a few cm off
+    zero, one = (0 << 16) | 3, (1 << 16) | 0
+    assert views_repeated(robot_map, again, [one], first, [zero], discovery).tolist() == [True]
+    assert views_repeated(robot_map, first, [zero], again, [one], discovery).tolist() == [False]
+    # the same finder's own view: rule 5 judged it already, when it was found
+    assert views_repeated(robot_map, again, [zero + 1], first, [zero], discovery).tolist() == [False]
+    # 2 m along the wall: a view of its own
+    along = np.array([[2.0, 3.0, 1.0, 1.0, 0.0, 0.0]])
+    assert views_repeated(robot_map, along, [one], first, [zero], discovery).tolist() == [False]
+    # nothing known, or an empty map: nothing is a repeat
+    assert not views_repeated(robot_map, again, [one], np.zeros((0, 6)), [], discovery).any()
+    assert not views_repeated(RobotMap(params), again, [one], first, [zero], discovery).any()
+    with pytest.raises(ValueError, match="one key per view"):
+        views_repeated(robot_map, again, [one, zero], first, [zero], discovery)
+    # the end of a wall (nothing mapped beyond y = 2.7): a teammate's view holds all but a strip of a view
+    # of the end, under 30 % of it, but not its face: no repeat (rule 5's exception)
+    end_map = _map_of(points[points[:, 1] <= 2.7], ids[points[:, 1] <= 2.7], camera, params)
+    end_cells = cells_of(points[points[:, 1] <= 2.7])
+    end, short = np.array([[2.0, 3.0, 1.0, 1.0, 0.0, 0.0]]), np.array([[2.0, 1.8, 1.0, 1.0, 0.0, 0.0]])
+    footprint = _sees(end[0], end_cells, discovery)
+    strip = footprint & ~_sees(short[0], end_cells, discovery)
+    face = end[0, :3] + discovery.standoff * end[0, 3:]
+    assert params.min_new_points <= strip.sum() < params.min_new_fraction * footprint.sum()
+    assert not _sees(short[0], face[None], discovery)[0]
+    assert views_repeated(end_map, end, [one], short, [zero], discovery).tolist() == [False]
+    # random views of the wall from both robots, against the rule written out
+    cells = cells_of(points)
+    views = np.column_stack(
+        [
+            rng.uniform(1.8, 2.2, 24),
+            rng.uniform(0.5, 3.5, 24),
+            rng.uniform(0.6, 1.4, 24),
+            np.ones(24),
+            np.zeros(24),
+            np.zeros(24),
+        ]
+    )
+    yaw = np.radians(rng.uniform(-30, 30, 24))
+    views[:, 3], views[:, 4] = np.cos(yaw), np.sin(yaw)
+    keys = np.array([(i % 2) << 16 | i for i in range(24)], np.int64)
+    got = views_repeated(robot_map, views, keys, views, keys, discovery)
+    expected = _repeated_by_hand(views, keys, views, keys, cells, params, discovery)
+    assert got.tolist() == expected
+    assert 0 < sum(expected) < 24  # the draw holds repeats and views of their own
 
 
 def test_two_candidates_on_one_patch_give_one_task():

@@ -1099,7 +1099,7 @@ def test_a_robot_retires_the_task_its_review_found_covered_when_it_comes_to_it(t
     agent.build_bundle(0.0)
     assert set(agent.path_keys()) == {covered.key, flown.key}
     first = agent.path_keys()[0]
-    robot.activity, robot.explored, robot.covered = "idle", True, {covered.key}
+    robot.activity, robot.explored, robot.covered = "idle", True, {covered.key: "repeat"}
     _placed(mission, {"rov0": [-1.5, 0.0, 1.0]})
     mission._estimate = lambda r: types.SimpleNamespace(position=np.array([-1.5, 0.0, 1.0]), yaw=0.0)
     mission._advance_activity(robot, now=2.0)
@@ -1110,9 +1110,10 @@ def test_a_robot_retires_the_task_its_review_found_covered_when_it_comes_to_it(t
         mission._advance_activity(robot, now=3.0)
     assert not agent.is_open(covered.key) and robot.activity == "idle"
     assert mission.tasks[covered.key]["retired"] and not mission.tasks[covered.key].get("completed")
+    assert mission.tasks[covered.key]["retired_why"] == "repeat"
     assert covered.key not in robot.covered
     mission._advance_activity(robot, now=4.0)
     assert robot.activity == "fly" or not agent.is_open(flown.key)
     mission.sim.close()
     retired = [e for e in read_events(tmp_path) if e["kind"] == "retired"]
-    assert [(e["robot"], e["task"]) for e in retired] == [("rov0", covered.key)]
+    assert [(e["robot"], e["task"], e["why"]) for e in retired] == [("rov0", covered.key, "repeat")]

@@ -32,6 +32,7 @@
     survey_sweep_no_dvl_deg = 0.0  # ... and a robot without one (0: the look's own view alone)
     sweep_rate_dvl_deg_s = 39.0    # how fast a robot with a DVL turns through a survey's sweep
     retire_taken = false   # map-aware robots retire tasks the team's views taken cover (true; off by default)
+    retire_repeats = false # ... and tasks whose views repeat a teammate's of lower key (true; off by default)
     explore_radius_m = 3.0 # ... within this of where each was launched (maptidal.exploration)
     inspect_region = "walls"  # what a map-aware team inspects: "walls" (the box of the evaluated walls)
                            # or "launch" (the exploration radius alone); inspect_box = [[x, y, z], [x, y, z]]
@@ -108,6 +109,7 @@ MISSION_KEYS = {
     "dense_depth",
     "dense_candidates_m",
     "retire_taken",
+    "retire_repeats",
     "inspect_region",
     "inspect_box",
 }
@@ -123,6 +125,7 @@ SETTING_TYPES: dict[str, type] = {
     "explore": bool,
     "survey_without_dvl": bool,
     "retire_taken": bool,
+    "retire_repeats": bool,
     "lost_stand_down": bool,
     "lost_hand_over": bool,
     "watch_pushes": bool,

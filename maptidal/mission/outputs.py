@@ -429,7 +429,8 @@ def mission_metrics(document: dict) -> dict:
         "tasks_done": sum(1 for t in tasks if t.get("completed")),
         # done and seen: the true view of the capture within the task's tolerances (None: not judged)
         "tasks_verified": sum(1 for t in tasks if t.get("verified")),
-        # retired unflown: the views the team had taken covered them (MissionParams.retire_taken)
+        # retired unflown: the views the team had taken covered them, or they repeated a teammate's task
+        # (MissionParams.retire_taken, retire_repeats)
         "tasks_retired": sum(1 for t in tasks if t.get("retired")),
         "pct_uninspected": float(coverage.get("pct_uninspected", 100.0)),
         "mean_views": float(coverage.get("mean_views", 0.0)),
@@ -564,8 +565,9 @@ def report_markdown(document: dict) -> str:
         "",
         f"Tasks: {m['tasks_found']} found, {m['tasks_done']} said done by the robots, {m['tasks_verified']} "
         "of them verified (the true view of the capture within the task's tolerances), "
-        f"{m['tasks_retired']} retired unflown (the views taken covered them). Coverage of the "
-        f"verified views (occlusion on): {m['pct_uninspected']:.1f} % of the walls uninspected. Comms: "
+        f"{m['tasks_retired']} retired unflown (the views taken covered them, or a teammate's repeated "
+        "them). Coverage of the verified views (occlusion on): "
+        f"{m['pct_uninspected']:.1f} % of the walls uninspected. Comms: "
         + (
             "unknown (no readable mission.json snapshot)."
             if m["messages"] is None

@@ -27,7 +27,7 @@ import numpy as np
 from maptidal.discovery import DiscoveryInputError, DiscoveryParams, discover
 from maptidal.executors import release_in_child, signals_held
 from maptidal.exploration import FrontierParams, explore, explore_views
-from maptidal.map_discovery import RobotMap, discover_on_map, gap_views, views_left_to_take
+from maptidal.map_discovery import RobotMap, discover_on_map, gap_views, views_left_to_take, views_repeated
 from maptidal.perception.dense import dense_points
 from maptidal.perception.frontend import FrontEnd
 from maptidal.perception.recording import CameraPose
@@ -59,6 +59,11 @@ class FrameJob:
     existing_keys: np.ndarray | None = None
     existing_done: np.ndarray | None = None
     to_review: np.ndarray | None = None
+    # whether the views taken (``existing_done``) retire the tasks to review (MissionParams.retire_taken)
+    review_taken: bool = True
+    # which of ``existing`` may stand for a task to review of higher key, whose view repeats theirs
+    # (maptidal.map_discovery.views_repeated; MissionParams.retire_repeats): None, no such review
+    stand_ins: np.ndarray | None = None
     # how long since the robot's last frame its dead reckoning ran without its DVL
     # (maptidal.perception.odometry: until its next fix it is then as unsure as a robot without one)
     dvl_out_s: float = 0.0
@@ -113,6 +118,8 @@ class FrameResult:
     # the search that gave ``frontier``, in numbers (maptidal.exploration.Exploration.summary): with no
     # look, why
     exploration: dict | None = None
+    # the keys of the reviewed tasks whose views repeat those of known tasks of lower key
+    repeats: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 def perceive(
@@ -134,7 +141,8 @@ def perceive(
         # an oracle localisation: the robot flies on the true pose it meshes on, a frame at a time
         correction, sigma = (record.pose.position - job.dead_reckoned.position)[:2], 0.0
     perception_s = time.perf_counter() - start
-    faces, new, rules, retired = 0, np.zeros((0, 6)), None, np.zeros(0, np.int64)
+    faces, new, rules = 0, np.zeros((0, 6)), None
+    retired, repeats = np.zeros(0, np.int64), np.zeros(0, np.int64)
     if keyframe is not None and len(keyframe.keyframe.mesh.faces):
         start = time.perf_counter()
         mesh = keyframe.keyframe.mesh
@@ -176,7 +184,7 @@ def perceive(
                     surface_points=surface,
                 )
                 new, rules = found.final, found.counts()
-                retired = _review(robot_map, job, discovery)
+                retired, repeats = _review(robot_map, job, discovery)
         except DiscoveryInputError:
             new = np.zeros((0, 6))  # a degenerate keyframe mesh finds nothing; the mission goes on
         discovery_s = time.perf_counter() - start
@@ -218,18 +226,34 @@ def perceive(
         retired,
         gaps,
         exploration,
+        repeats,
     )
 
 
-def _review(robot_map: RobotMap, job: FrameJob, discovery: DiscoveryParams) -> np.ndarray:
-    """The keys of the job's tasks to review whose views the done ones leave nothing to, on the map."""
-    if job.to_review is None or job.existing_done is None or job.existing_keys is None:
-        return np.zeros(0, np.int64)
-    review, done = np.asarray(job.to_review, bool), np.asarray(job.existing_done, bool)
-    if not review.any() or not done.any():
-        return np.zeros(0, np.int64)
-    left = views_left_to_take(robot_map, job.existing[review], job.existing[done], discovery)
-    return np.asarray(job.existing_keys, np.int64)[review][~left]
+def _review(robot_map: RobotMap, job: FrameJob, discovery: DiscoveryParams) -> tuple[np.ndarray, np.ndarray]:
+    """The keys of the job's tasks to review whose views the done ones leave nothing to, on the map
+    (``review_taken``), and those, of the rest, whose views repeat those of its stand-ins of lower key."""
+    none = np.zeros(0, np.int64)
+    if job.to_review is None or job.existing_keys is None:
+        return none, none
+    keys = np.asarray(job.existing_keys, np.int64)
+    review = np.asarray(job.to_review, bool).copy()
+    if not review.any():
+        return none, none
+    retired = none
+    done = None if job.existing_done is None else np.asarray(job.existing_done, bool)
+    if job.review_taken and done is not None and done.any():
+        left = views_left_to_take(robot_map, job.existing[review], job.existing[done], discovery)
+        retired = keys[review][~left]
+        review &= ~np.isin(keys, retired)
+    repeats = none
+    if job.stand_ins is not None and review.any():
+        stand_ins = np.asarray(job.stand_ins, bool)
+        repeated = views_repeated(
+            robot_map, job.existing[review], keys[review], job.existing[stand_ins], keys[stand_ins], discovery
+        )
+        repeats = keys[review][repeated]
+    return retired, repeats
 
 
 class InlinePerception:

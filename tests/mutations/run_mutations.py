@@ -61,6 +61,7 @@ REGION_TESTS = [
     "tests/test_mission.py::test_the_box_a_team_is_sent_to_inspect",
     "tests/test_mission.py::test_a_robot_retires_the_task_its_review_found_covered_when_it_comes_to_it",
     "tests/test_loop_discovery.py::test_perception_reviews_the_path_against_the_views_taken_on_its_map",
+    "tests/test_loop_discovery.py::test_a_frame_asks_for_the_reviews_the_mission_settings_ask_for",
 ]
 EXPLORE_TESTS = [
     "tests/test_exploration.py",
@@ -1640,8 +1641,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/mission/perception.py",
-                "    review, done = np.asarray(job.to_review, bool), np.asarray(job.existing_done, bool)\n",
-                "    review, done = np.asarray(job.to_review, bool), ~np.asarray(job.to_review, bool)\n",
+                "    done = None if job.existing_done is None else np.asarray(job.existing_done, bool)\n",
+                "    done = None if job.existing_done is None else ~np.asarray(job.to_review, bool)\n",
             )
         ],
     ),
@@ -1665,6 +1666,66 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
                 "maptidal/mission/run.py",
                 "    return np.asarray(tank.evaluated_surface().bounds, float)",
                 "    return np.asarray(tank.evaluated_surface().bounds, float) * [[1, 1, 1], [1, 1, 0.5]]",
+            )
+        ],
+    ),
+    "X8": (
+        "a repeat judged against views of higher key",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "(known_keys[:, None] < row_keys[None, :]) & (finder",
+                "(known_keys[:, None] != row_keys[None, :]) & (finder",
+            )
+        ],
+    ),
+    "X9": (
+        "a robot's own views judged repeats of each other",
+        [
+            (
+                "maptidal/map_discovery.py",
+                " & (finder[:, None] != row_finder[None, :])\n",
+                "\n",
+            )
+        ],
+    ),
+    "X10": (
+        "a repeat needs no stand-in to hold its face",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "    stands_for &= face_in_known\n",
+                "    pass\n",
+            )
+        ],
+    ),
+    "X11": (
+        "a repeat judged on rule 5's count alone, not its share",
+        [
+            (
+                "maptidal/map_discovery.py",
+                "(new < params.min_new_points) | (new < params.min_new_fraction * footprint)",
+                "(new < params.min_new_points)",
+            )
+        ],
+    ),
+    "X12": (
+        "the tasks a robot gave up stand in for repeats",
+        [
+            (
+                "maptidal/mission/perception.py",
+                "        stand_ins = np.asarray(job.stand_ins, bool)\n",
+                "        stand_ins = np.ones(len(keys), bool)\n",
+            )
+        ],
+    ),
+    "X13": (
+        "retire_repeats asked for, and no repeat review sent",
+        [
+            (
+                "maptidal/mission/run.py",
+                '"stand_ins": ~np.isin(keys, list(robot.skipped)) if self.params.retire_repeats else None,',
+                '"stand_ins": None,',
             )
         ],
     ),
