@@ -9,7 +9,8 @@ from pathlib import Path
 
 from maptidal.envs.scenario import Scenario
 from maptidal.mission.config import load_mission
-from maptidal.mission.run import Mission, MissionParams
+from maptidal.mission.params import MissionParams
+from maptidal.mission.run import Mission
 
 
 @contextlib.contextmanager

@@ -13,7 +13,8 @@ import pytest
 from maptidal.controllers.flight_modes import ModeParams, lean_stick, pilot_lean_angles
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import read_events
-from maptidal.mission.run import Mission, MissionParams
+from maptidal.mission.params import MissionParams
+from maptidal.mission.run import Mission
 from maptidal.mission.verification import check_view, pitch_to_fly, view_pitch
 
 
@@ -117,7 +118,7 @@ def test_bad_tolerances_are_refused():
 
 
 def test_a_mission_refuses_an_endless_duration_and_events_after_its_end():
-    from maptidal.mission.run import MissionEvent
+    from maptidal.mission.params import MissionEvent
 
     with pytest.raises(ValueError, match="at most 86400 s"):
         MissionParams(duration_s=1e12)

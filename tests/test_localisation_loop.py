@@ -16,7 +16,8 @@ from maptidal.controllers.estimation import MotionModel
 from maptidal.controllers.trajectory import PoseTrajectory, Route
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import read_events, standing_down_spans
-from maptidal.mission.run import Mission, MissionParams
+from maptidal.mission.params import MissionParams
+from maptidal.mission.run import Mission
 
 
 def test_an_unsure_robot_goes_home_and_is_found_again_only_when_sure(tmp_path):

@@ -20,7 +20,9 @@ from maptidal.evaluation.free_space import free_space_mask
 from maptidal.mission import run as run_module
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import read_events, rebuild
-from maptidal.mission.run import Mission, MissionParams, inspection_box
+from maptidal.mission.params import MissionParams
+from maptidal.mission.plan import inspection_box
+from maptidal.mission.run import Mission
 from maptidal.tank import LadderConfig, TankConfig, TankModel, WindowConfig
 
 REACHABLE = run_module.reachable

@@ -24,7 +24,8 @@ from cli_helpers import assert_one_line_error, maptidal_here, run_maptidal
 from maptidal.evaluation.coverage import CoverageModel, CoverageParams
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import mission_metrics, read_events, time_to_coverage
-from maptidal.mission.run import Mission, MissionParams
+from maptidal.mission.params import MissionParams
+from maptidal.mission.run import Mission
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -462,7 +463,7 @@ def test_a_failed_robots_tasks_pass_to_the_survivor(tmp_path):
     import dataclasses
 
     from maptidal.allocation.messages import DONE
-    from maptidal.mission.run import MissionEvent
+    from maptidal.mission.params import MissionEvent
 
     scenario, _ = load_mission(None)
     with_dvl = tuple(
@@ -510,7 +511,7 @@ def test_a_robot_joins_the_mission_and_the_auction_when_its_time_comes(tmp_path)
     them: at 500 bit/s, with 250-byte frames every 4 s per robot, a backlog of a hundred tasks takes
     minutes to pass on)."""
     from maptidal.mission.outputs import _trajectory_rows
-    from maptidal.mission.run import MissionEvent
+    from maptidal.mission.params import MissionEvent
 
     scenario = _third_robot(load_mission(None)[0])
     # the paper's discovery, whose many tasks give the late robot some to win
@@ -545,7 +546,7 @@ def test_a_link_outage_drops_every_message_in_its_window(tmp_path):
     """All links are down from 5 to 20 s: every broadcast in that window counts as link-down at its one
     receiver, and none outside it; a pair outage names the two robots' indices."""
     from maptidal.comms.channel import Outage
-    from maptidal.mission.run import MissionEvent
+    from maptidal.mission.params import MissionEvent
 
     scenario, _ = load_mission(None)
     params = MissionParams(
@@ -629,7 +630,7 @@ def test_after_a_failure_the_survivor_finishes_every_task_and_the_mission_ends(t
     import dataclasses
 
     from maptidal.discovery import DiscoveryParams
-    from maptidal.mission.run import MissionEvent
+    from maptidal.mission.params import MissionEvent
 
     scenario, _ = load_mission(None)
     with_dvl = tuple(
@@ -1075,7 +1076,7 @@ def test_the_box_a_team_is_sent_to_inspect():
     """``inspect_region = "walls"``: the box of the tank's evaluated walls, written out for the default
     tank (end wall 2.4 m, angled walls 1 m at 45 deg, 0.5 m of each side wall, a 10 cm window recess, 2 m
     of water); "launch": none; ``inspect_box`` states one."""
-    from maptidal.mission.run import inspection_box
+    from maptidal.mission.plan import inspection_box
 
     scenario, _ = load_mission(None)
     box = inspection_box(MissionParams(), scenario.tank)

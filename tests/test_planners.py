@@ -17,7 +17,9 @@ from maptidal.cli import main
 from maptidal.evaluation.baselines import boustrophedon_viewpoints, voronoi_viewpoints
 from maptidal.mission.config import load_mission
 from maptidal.mission.outputs import read_events
-from maptidal.mission.run import Mission, MissionParams, into_reach, plan_tasks
+from maptidal.mission.params import MissionParams
+from maptidal.mission.plan import into_reach, plan_tasks
+from maptidal.mission.run import Mission
 from maptidal.tank import TankModel
 
 # a robot keeps 0.35 m from the floor and the surface (the mission's reach margin), and the OSB tank

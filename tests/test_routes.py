@@ -10,8 +10,8 @@ import pytest
 
 from maptidal.controllers.estimation import wrap_angle
 from maptidal.controllers.trajectory import MotionLimits, PoseTrajectory, Route
+from maptidal.mission.params import MissionParams
 from maptidal.mission.routes import survey_route, sweep_legs
-from maptidal.mission.run import MissionParams
 
 LIMITS = MotionLimits(max_speed=0.25, max_accel=0.1, max_yaw_rate=math.radians(12), max_yaw_accel=0.2)
 SWEEP = math.radians(60)

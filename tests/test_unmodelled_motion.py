@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 from maptidal.envs.scenario import load_scenario
 from maptidal.envs.simulation import Simulation
 from maptidal.mission.outputs import read_events
-from maptidal.mission.run import MissionParams
+from maptidal.mission.params import MissionParams
 from maptidal.perception.odometry import OdometryParams, VisualOdometry
 from maptidal.perception.recording import CameraPose
 from maptidal.perception.unmodelled import UnmodelledMotion, UnmodelledMotionParams

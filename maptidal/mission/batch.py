@@ -101,7 +101,7 @@ class BatchRun:
 def parse_planners(text: str) -> list[str]:
     """Planners from ``"all"`` or a comma list of ``maptidal``, ``voronoi`` and ``boustrophedon``;
     ValueError naming the unknown one otherwise."""
-    from maptidal.mission.run import PLANNERS
+    from maptidal.mission.params import PLANNERS
 
     if text.strip() == "all":
         return list(PLANNERS)

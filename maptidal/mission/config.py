@@ -74,7 +74,7 @@ from maptidal.envs.scenario import (
 )
 from maptidal.exploration import FrontierParams
 from maptidal.map_discovery import MapAwareParams
-from maptidal.mission.run import MissionEvent, MissionParams, check_events
+from maptidal.mission.params import MissionEvent, MissionParams, check_events
 
 DEFAULT_MISSION = SCENARIO_DIR / "mission.toml"
 MISSION_KEYS = {

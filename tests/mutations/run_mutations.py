@@ -172,8 +172,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "assets/bluerov2/bluerov2.toml",
-                "centre_of_buoyancy = [0.0, 0.0, 0.01]",
-                "centre_of_buoyancy = [0.0, 0.0, 0.1]",
+                "centre_of_buoyancy = [0.0, 0.0, 0.049]",
+                "centre_of_buoyancy = [0.0, 0.0, 0.49]",
             )
         ],
     ),
@@ -217,8 +217,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "controllers/thrusters.py",
-                "s = np.clip((np.abs(p) - self.deadband_us) / span, 0.0, 1.0)",
-                "s = np.clip(np.abs(p) / 400.0, 0.0, 1.0)",
+                "s = ((np.abs(p) - self.deadband_us) / span).clip(0.0, 1.0)",
+                "s = (np.abs(p) / 400.0).clip(0.0, 1.0)",
             )
         ],
     ),
@@ -237,7 +237,7 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "envs/simulation.py",
-                "normalised = self._specs[robot].vehicle.thruster.normalised_thrust(thrusters)",
+                "normalised = self._plants[robot].thruster.normalised_thrust(thrusters)",
                 "normalised = thrusters",
             )
         ],
@@ -648,8 +648,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/perception/frontend.py",
-                "pose = self.odometry.update(pose, motion, dt, unaided_s)",
-                "pose = self.odometry.update(pose, motion, dt)",
+                "pose = self.odometry.update(pose, motion, dt, unaided_s, unmodelled_m)",
+                "pose = self.odometry.update(pose, motion, dt, 0.0, unmodelled_m)",
             )
         ],
     ),
@@ -1151,7 +1151,7 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/map_discovery.py",
-                "    if surface_points is not None and params.dense_candidates_m > 0:",
+                "    if surface_points is not None and cell_m > 0:",
                 "    if False:",
             )
         ],
@@ -1161,8 +1161,9 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/map_discovery.py",
-                "            points = points[points[:, 2] < self.params.surface_z - SURFACE_BAND_M]",
-                "            points = points",
+                "            points = points[~water_surface(points, self.params.surface_z, "
+                "self.params.wall_reach_m)]\n        keys = _packed(",
+                "            pass\n        keys = _packed(",
             )
         ],
     ),
@@ -1508,7 +1509,7 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         "a baseline's viewpoints out of the reach band left out, not moved into it",
         [
             (
-                "maptidal/mission/run.py",
+                "maptidal/mission/plan.py",
                 "    rows[outside, 2] = np.clip(rows[outside, 2], low, high)\n",
                 "",
             )
@@ -1518,7 +1519,7 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         "a viewpoint below the band moved to its top edge",
         [
             (
-                "maptidal/mission/run.py",
+                "maptidal/mission/plan.py",
                 "np.clip(rows[outside, 2], low, high)",
                 "np.where(rows[outside, 2] < low, high, low)",
             )
@@ -1528,7 +1529,7 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         "viewpoints looking down moved as well",
         [
             (
-                "maptidal/mission/run.py",
+                "maptidal/mission/plan.py",
                 "    level = np.abs(rows[:, 5]) < 1e-6",
                 "    level = np.abs(rows[:, 5]) < 2.0",
             )
@@ -1536,11 +1537,11 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
     ),
     "P4": (
         "coinciding viewpoints merged whichever way they look",
-        [("maptidal/mission/run.py", " and rows[k, 3:] @ rows[j, 3:] > 0.999", "")],
+        [("maptidal/mission/plan.py", " and rows[k, 3:] @ rows[j, 3:] > 0.999", "")],
     ),
     "P5": (
         "no merging of coinciding viewpoints",
-        [("maptidal/mission/run.py", "        if not duplicate:\n", "        if True:\n")],
+        [("maptidal/mission/plan.py", "        if not duplicate:\n", "        if True:\n")],
     ),
     "W1": (
         "a teammate's way entered only through its end balls, never the cylinder's side",
@@ -1663,7 +1664,7 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         "the box of the walls cut at half the water's depth",
         [
             (
-                "maptidal/mission/run.py",
+                "maptidal/mission/plan.py",
                 "    return np.asarray(tank.evaluated_surface().bounds, float)",
                 "    return np.asarray(tank.evaluated_surface().bounds, float) * [[1, 1, 1], [1, 1, 0.5]]",
             )
@@ -1774,8 +1775,8 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         [
             (
                 "maptidal/mission/routes.py",
-                "[PoseTrajectory(start, start_yaw, look, yaw, limits), *sweep_legs(",
-                "[PoseTrajectory(start, start_yaw, look, start_yaw, limits), *sweep_legs(",
+                "Route([PoseTrajectory(start, start_yaw, look, yaw, limits), *sweep])",
+                "Route([PoseTrajectory(start, start_yaw, look, start_yaw, limits), *sweep])",
             )
         ],
     ),
@@ -2237,7 +2238,7 @@ MUTATIONS: dict[str, tuple[str, list[tuple[str, str, str]]]] = {
         "the hand-over on by default",
         [
             (
-                "maptidal/mission/run.py",
+                "maptidal/mission/params.py",
                 "    lost_hand_over: bool = False\n",
                 "    lost_hand_over: bool = True\n",
             )
