@@ -392,6 +392,7 @@ def _alive(pid: int) -> bool:
         ("[mission]\ninspect_box = [[0, 0, 0], [1, -1, 1]]\n", "inspect_box"),
         ("[mission]\ninspect_box = 3\n", "inspect_box"),
         ("[mission]\nretire_taken = 1\n", "retire_taken"),
+        ('[mission]\nretire_repeats = "yes"\n', "retire_repeats"),
         ("[mission]\nlost_stand_down = 0\n", "lost_stand_down"),
         ('[mission]\nlost_hand_over = "yes"\n', "lost_hand_over"),
         ('[[mission.events]]\ntime_s = 5\nkind = "fail"\nrobot = "rov7"\n', "rov7"),
