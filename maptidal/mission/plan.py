@@ -13,11 +13,8 @@ from maptidal.evaluation.baselines import boustrophedon_viewpoints, voronoi_view
 from maptidal.evaluation.free_space import free_space_mask
 from maptidal.mission.params import MissionParams
 
-REACH_MARGIN_M = (
-    0.35  # a task closer than this to a wall, the floor or the surface is out of the robot's reach
-)
-
-
+# a task closer than this to a wall, the floor or the surface is out of the robot's reach
+REACH_MARGIN_M = 0.35
 PLANNER_VIEWPOINTS = {"voronoi": voronoi_viewpoints, "boustrophedon": boustrophedon_viewpoints}
 # the origin byte of a mission plan's task keys (maptidal.allocation.tasks.task_key): robots mint theirs
 # from their own index, at most 255 robots below it
